@@ -1,0 +1,1 @@
+"""Contact-aware CasADi trajectory-optimisation retargeting (no torch)."""
