@@ -1,0 +1,196 @@
+"""Configuration of the MoTok tokenizer and of its training (defaults live here only).
+
+No torch import: the CLI reads and validates these before any heavy module loads.
+
+A run directory stores the two configs in ``config.json``::
+
+    {"format": "motok-tokenizer", "version": 1,
+     "tokenizer": {...TokenizerConfig...}, "train": {...TrainConfig...}}
+
+A ``--config FILE.json`` given to ``motok-robot train tokenizer`` has the same
+``"tokenizer"`` / ``"train"`` sections; each key overrides the default, and an unknown
+key is an :class:`~motok_robot.errors.InputError` naming the key.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from motok_robot.errors import InputError
+
+FORMAT = "motok-tokenizer"
+FORMAT_VERSION = 1
+
+#: HumanML3D feature layout: dims 0..3 are the root trajectory (rotational velocity about
+#: up, planar velocity x/z in the root frame, root height) - the dims GMD's emphasis
+#: projection up-weights.
+ROOT_TRAJECTORY_DIMS: tuple[int, ...] = (0, 1, 2, 3)
+
+
+@dataclass
+class TokenizerConfig:
+    """Architecture of a MoTok tokenizer.
+
+    Token rate is ``fps / downsample`` tokens per second of motion (5 at the defaults).
+    """
+
+    feature_dim: int = 263  #: per-frame motion feature size (HumanML3D layout)
+    fps: int = 20  #: frames per second of the feature sequences
+    downsample: int = 4  #: temporal downsampling of the encoder: 2, 4 or 8 frames per token
+    kernel_size: int = 3  #: kernel size (frames) of the residual convolutions of encoder/decoder
+    width: int = 256  #: channels of the encoder / conditioning decoder
+    depth: int = 2  #: residual blocks per resolution stage
+    codebook_size: int = 512  #: K, entries of the single shared codebook
+    code_dim: int = 256  #: d, size of a codebook entry (latent dimension)
+    commitment: float = 0.02  #: weight of the commitment loss ||h - sg(q)||^2
+    ema_decay: float = 0.99  #: EMA decay of the codebook updates
+    dead_code_threshold: float = 1.0  #: codes whose EMA count falls below this are restarted
+    decoder: str = "diffusion"  #: "diffusion" (MoTok) or "conv" (plain VQ-VAE regression baseline)
+    denoiser_width: int = 256  #: channels of the denoiser
+    denoiser_blocks: int = 8  #: residual blocks of the denoiser (dilations 1, 2, 4, 8 repeating)
+    denoiser_kernel: int = 3  #: kernel size of the denoiser convolutions
+    parameterisation: str = "x0"  #: the denoiser predicts "x0" (clean motion, MDM) or "eps" (noise, GMD)
+    diffusion_steps: int = 1000  #: discrete training timesteps of the cosine schedule
+    sample_steps: int = 20  #: default number of DDIM steps at decoding
+    emphasis: bool = False  #: GMD emphasis projection of the (normalised) motion, train and sample
+    emphasis_c: float = 5.0  #: emphasis factor c on the root-trajectory dims
+    emphasis_dims: tuple[int, ...] = ROOT_TRAJECTORY_DIMS  #: dims multiplied by c
+    emphasis_seed: int = 0  #: seed of the fixed standard-normal matrix A'
+    joint_weight: float = 0.0  #: MDM geometric loss: joint positions (m^2), needs features_torch
+    velocity_weight: float = 0.0  #: MDM geometric loss: joint velocities (m^2/frame^2)
+    foot_weight: float = 0.0  #: MDM geometric loss: foot velocity where the contact bit is set
+
+    def __post_init__(self) -> None:
+        self.emphasis_dims = tuple(int(d) for d in self.emphasis_dims)
+        self.validate()
+
+    def validate(self) -> None:
+        if self.downsample not in (1, 2, 4, 8, 16):
+            raise InputError(f"tokenizer config: downsample must be 2, 4 or 8 (got {self.downsample})")
+        if self.kernel_size < 1 or self.kernel_size % 2 == 0:
+            raise InputError(f"tokenizer config: kernel_size must be odd and >= 1 (got {self.kernel_size})")
+        if self.denoiser_kernel < 1 or self.denoiser_kernel % 2 == 0:
+            raise InputError(f"tokenizer config: denoiser_kernel must be odd and >= 1 (got {self.denoiser_kernel})")
+        if self.decoder not in ("diffusion", "conv"):
+            raise InputError(f"tokenizer config: decoder must be 'diffusion' or 'conv' (got {self.decoder!r})")
+        if self.parameterisation not in ("x0", "eps"):
+            raise InputError(f"tokenizer config: parameterisation must be 'x0' or 'eps' (got {self.parameterisation!r})")
+        if self.codebook_size < 2:
+            raise InputError(f"tokenizer config: codebook_size must be >= 2 (got {self.codebook_size})")
+        for name in ("width", "depth", "code_dim", "denoiser_width", "denoiser_blocks", "diffusion_steps", "sample_steps", "feature_dim", "fps"):
+            if int(getattr(self, name)) < 1:
+                raise InputError(f"tokenizer config: {name} must be >= 1 (got {getattr(self, name)})")
+        if not 0.0 < self.ema_decay < 1.0:
+            raise InputError(f"tokenizer config: ema_decay must be in (0, 1) (got {self.ema_decay})")
+        bad = [d for d in self.emphasis_dims if not 0 <= d < self.feature_dim]
+        if bad:
+            raise InputError(f"tokenizer config: emphasis_dims {bad} outside 0..{self.feature_dim - 1}")
+
+    @property
+    def frames_per_token(self) -> int:
+        return self.downsample
+
+    @property
+    def tokens_per_second(self) -> float:
+        return self.fps / self.downsample
+
+
+@dataclass
+class TrainConfig:
+    """Optimisation of a tokenizer (``motok-robot train tokenizer``)."""
+
+    seed: int = 0  #: seeds initialisation, window sampling, noise and codebook restarts
+    batch_size: int = 64  #: windows per step
+    window: int = 64  #: frames per training window (rounded down to a multiple of downsample)
+    lr: float = 2e-4  #: peak AdamW learning rate
+    weight_decay: float = 0.0
+    warmup_steps: int = 500  #: linear warm-up, then cosine decay to lr_min_ratio * lr
+    lr_min_ratio: float = 0.05
+    grad_clip: float = 1.0  #: max global gradient norm (0 = off)
+    epochs: int = 100  #: used when steps is 0
+    steps: int = 0  #: total optimiser steps (overrides epochs when > 0)
+    steps_per_epoch: int = 0  #: 0 = ceil(train clips / batch_size)
+    checkpoint_every: int = 1000  #: steps between checkpoints (also at each epoch end)
+    val_clips: int = 64  #: validation windows decoded each epoch (fixed, seeded)
+    val_sample_steps: int = 10  #: DDIM steps for the validation decode
+    device: str = "cpu"
+    num_threads: int = 0  #: torch CPU threads (0 = torch default)
+
+    def validate(self) -> None:
+        for name in ("batch_size", "window"):
+            if int(getattr(self, name)) < 1:
+                raise InputError(f"train config: {name} must be >= 1 (got {getattr(self, name)})")
+        if self.lr <= 0:
+            raise InputError(f"train config: lr must be > 0 (got {self.lr})")
+        if self.steps < 0 or self.epochs < 0 or self.steps_per_epoch < 0:
+            raise InputError("train config: steps, epochs and steps_per_epoch must be >= 0")
+        if self.steps == 0 and self.epochs == 0:
+            raise InputError("train config: one of steps or epochs must be > 0")
+        if self.checkpoint_every < 1:
+            raise InputError(f"train config: checkpoint_every must be >= 1 (got {self.checkpoint_every})")
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+
+def _from_dict(cls, data: dict[str, Any], where: str):
+    if not isinstance(data, dict):
+        raise InputError(f"{where}: expected a JSON object, got {type(data).__name__}")
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise InputError(f"{where}: unknown key(s) {unknown}; known: {sorted(names)}")
+    try:
+        return cls(**data)
+    except TypeError as exc:  # pragma: no cover - defensive
+        raise InputError(f"{where}: {exc}") from None
+
+
+def tokenizer_config_from_dict(data: dict[str, Any], where: str = "tokenizer config") -> TokenizerConfig:
+    return _from_dict(TokenizerConfig, data, where)
+
+
+def train_config_from_dict(data: dict[str, Any], where: str = "train config") -> TrainConfig:
+    return _from_dict(TrainConfig, data, where)
+
+
+def to_dict(config) -> dict[str, Any]:
+    out = dataclasses.asdict(config)
+    for key, value in out.items():
+        if isinstance(value, tuple):
+            out[key] = list(value)
+    return out
+
+
+def read_config_file(path: str | Path) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Read a JSON config file -> (tokenizer section, train section), both possibly empty."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(f"{path}: config file not found") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(data, dict):
+        raise InputError(f"{path}: expected a JSON object with 'tokenizer' and/or 'train' sections")
+    unknown = sorted(set(data) - {"tokenizer", "train", "format", "version"})
+    if unknown:
+        raise InputError(f"{path}: unknown section(s) {unknown}; expected 'tokenizer' and/or 'train'")
+    return dict(data.get("tokenizer") or {}), dict(data.get("train") or {})
+
+
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "ROOT_TRAJECTORY_DIMS",
+    "TokenizerConfig",
+    "TrainConfig",
+    "read_config_file",
+    "to_dict",
+    "tokenizer_config_from_dict",
+    "train_config_from_dict",
+]
