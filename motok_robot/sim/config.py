@@ -1,0 +1,167 @@
+"""Every threshold of the validation stage, in one place.
+
+:class:`ValidationConfig` holds the thresholds and model choices used by
+:mod:`motok_robot.sim.kinematic`, :mod:`motok_robot.sim.dynamics`,
+:mod:`motok_robot.sim.rollout` and the verdict in :mod:`motok_robot.sim.report`.
+Each field's comment says what it measures, its unit and why its default is what it is.
+From the command line any field can be changed with ``--set key=value`` (repeatable);
+:func:`ValidationConfig.with_overrides` parses those strings and rejects unknown keys.
+
+Units: metres, seconds, radians, newton metres.  Ratios are dimensionless.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, fields
+
+from motok_robot.errors import InputError
+
+
+@dataclass(frozen=True)
+class ValidationConfig:
+    """Thresholds of the validation checks (defaults tuned for 0.5-1.8 m humanoids).
+
+    A check passes when its value is on the safe side of its threshold; see
+    ``docs/validation.md`` for the table of checks.
+    """
+
+    # ---- foot contact and skating -------------------------------------------------------
+    #: a foot is *in contact* at a frame when the lowest of its sole corner sites is below this
+    #: height (m).  5 mm: above retargeting noise (soles held within 1 mm of the floor while
+    #: planted), below any deliberate foot lift.
+    contact_height_m: float = 0.005
+    #: a foot in contact *skates* at a frame when its sole-centre horizontal speed exceeds this
+    #: (m/s).  5 cm/s is 1/4 of a slow robot walk's foot speed and 10x the 5 mm drift per
+    #: contact phase that retargeting allows spread over a 0.1 s phase.
+    skate_speed_mps: float = 0.05
+    #: fail when more than this fraction of a foot's contact frames skate.
+    max_foot_skate_ratio: float = 0.10
+    #: fail when a foot moves horizontally more than this in total while in contact (m),
+    #: summed over the clip.
+    max_foot_skate_distance_m: float = 0.03
+
+    # ---- ground ------------------------------------------------------------------------
+    #: fail when a sole corner goes deeper than this below the floor (m).  Retargeting keeps
+    #: soles above -1 mm; 5 mm leaves room for the contact softness of the physics model.
+    max_penetration_m: float = 0.005
+    #: fail when the lowest sole point of the whole robot is higher than this above the floor
+    #: (m) -- the robot floats.  Counts only frames not marked as intentional flight (none are).
+    max_float_m: float = 0.03
+
+    # ---- self-collision ----------------------------------------------------------------
+    #: two geoms of non-adjacent bodies overlapping deeper than this count as a self-collision
+    #: (m); 2 mm ignores touching surfaces.
+    self_collision_depth_m: float = 0.002
+    #: fail when more than this many frames contain a self-collision.
+    max_self_collision_frames: int = 0
+
+    # ---- joint limits, speed, acceleration ---------------------------------------------
+    #: a joint is beyond its limit when outside its range by more than this (rad).
+    joint_limit_tolerance_rad: float = 0.01
+    #: fail when more than this many (frame, joint) pairs are beyond their limits.
+    max_joint_limit_violations: int = 0
+    #: fail when |joint velocity| / servo velocity limit exceeds this anywhere.
+    max_velocity_ratio: float = 1.0
+    #: fail when |joint acceleration| exceeds this anywhere (rad/s^2); a jitter detector:
+    #: human motion at 20 fps stays below ~100 rad/s^2 on the joints of a small humanoid.
+    max_joint_acceleration_radps2: float = 200.0
+    #: fail when |required torque| / actuator force limit exceeds this anywhere.
+    max_torque_ratio: float = 1.0
+    #: friction coefficient of the feet used to distribute the ground reaction in inverse
+    #: dynamics (the linearised cone of :mod:`motok_robot.sim.dynamics`).
+    friction_coefficient: float = 0.8
+
+    # ---- balance -----------------------------------------------------------------------
+    #: static balance is judged on quasi-static frames only: where the centre of mass moves
+    #: horizontally slower than this (m/s).  In a walk the CoM legitimately leaves the stance
+    #: foot while moving; a held lean does not move.
+    static_com_speed_mps: float = 0.05
+    #: fail when the signed CoM margin (m, positive inside the support polygon) of a
+    #: quasi-static contact frame falls below this.
+    min_balance_margin_m: float = 0.0
+    #: ZMP model: "multibody" (centroidal: CoM acceleration + rate of angular momentum of the
+    #: whole multibody) or "cart_table" (CoM acceleration only, linear inverted pendulum).
+    zmp_model: str = "multibody"
+    #: a ZMP counts as outside when it is outside the support polygon by more than this (m).
+    zmp_tolerance_m: float = 0.005
+    #: fail when more than this fraction of support frames have the ZMP outside.
+    max_zmp_outside_ratio: float = 0.05
+    #: centred moving-average window (frames) applied to positions before the second finite
+    #: difference of the ZMP; 1 = none.  Smooths the 20 fps differentiation noise.
+    zmp_smoothing_frames: int = 3
+
+    # ---- physics rollout ---------------------------------------------------------------
+    #: the robot has fallen when its root body is lower than this fraction of its frame-0
+    #: height...
+    fall_height_ratio: float = 0.6
+    #: ...or its root body's up axis tilts more than this from vertical (rad; 1.0 rad = 57 deg).
+    fall_tilt_rad: float = 1.0
+    #: fail when the per-joint tracking RMSE averaged over joints exceeds this (rad).
+    max_tracking_rmse_rad: float = 0.15
+    #: fail when the root body ends farther than this (horizontally) from the reference (m)
+    #: per metre of robot height -- the threshold scales with robot size.
+    max_base_drift_per_height: float = 0.5
+    #: centre of pressure sampling rate in the rollout (Hz); contact forces are read there.
+    cop_rate_hz: float = 50.0
+    #: fail when more than this fraction of CoP samples with contact lie outside the support
+    #: polygon by more than ``zmp_tolerance_m``.
+    max_cop_outside_ratio: float = 0.05
+    #: physics timestep (s); 0 keeps the robot model's own ``opt.timestep``.
+    physics_timestep_s: float = 0.0
+    #: proportional gain (N m / rad per N m of force limit) of the software PD used only for
+    #: robots whose actuators are plain motors (position servos track their own targets).
+    motor_kp_per_nm: float = 10.0
+    #: derivative gain of that PD, as a fraction of the proportional gain (s).
+    motor_kd_ratio: float = 0.05
+
+    # ---- render ------------------------------------------------------------------------
+    #: frames per second of the MP4.
+    render_fps: float = 30.0
+    #: width and height (pixels) of the MP4; both robots share one view.
+    render_width: int = 640
+    render_height: int = 360
+
+    @classmethod
+    def keys(cls) -> list[str]:
+        """Names of all fields, in declaration order."""
+        return [f.name for f in fields(cls)]
+
+    def with_overrides(self, assignments: list[str] | dict | None) -> "ValidationConfig":
+        """A copy with fields changed by ``["key=value", ...]`` strings or a ``{key: value}`` dict.
+
+        Values are converted to the field's type; an unknown key or an unparsable value raises
+        :class:`~motok_robot.errors.InputError` naming it.
+        """
+        if not assignments:
+            return self
+        if isinstance(assignments, dict):
+            items = list(assignments.items())
+        else:
+            items = []
+            for text in assignments:
+                if "=" not in text:
+                    raise InputError(f"--set {text!r}: expected key=value")
+                key, value = text.split("=", 1)
+                items.append((key.strip(), value.strip()))
+        types = {f.name: f.type for f in fields(self)}
+        changes = {}
+        for key, value in items:
+            if key not in types:
+                raise InputError(f"--set {key}: unknown validation setting; known: {', '.join(types)}")
+            kind = types[key]
+            try:
+                if kind in ("int", int):
+                    changes[key] = int(value)
+                elif kind in ("float", float):
+                    changes[key] = float(value)
+                else:
+                    changes[key] = str(value)
+            except ValueError:
+                raise InputError(f"--set {key}={value}: not a valid {kind}") from None
+        if "zmp_model" in changes and changes["zmp_model"] not in ("multibody", "cart_table"):
+            raise InputError(f"--set zmp_model={changes['zmp_model']}: use multibody or cart_table")
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)

@@ -1,0 +1,161 @@
+"""What validation needs to know about a robot, resolved once to MuJoCo ids.
+
+:func:`index_robot` takes a :class:`motok_robot.robots.Robot` (docs/CONTRACTS.md: ``model``,
+``name``, ``joint_names``, ``qpos_adr``, ``dof_adr``, ``joint_range``, ``velocity_limit``,
+``torque_limit``, ``nominal_qpos()``, ``soles``) and returns a :class:`RobotIndex` with the
+site / body / actuator ids used by the checks, plus three model copies:
+
+* ``kin_model``: the robot with every constraint disabled (``mjDSBL_CONSTRAINT``), used for
+  kinematic replay and for inverse dynamics *without* contacts (the ground reaction is then
+  distributed over the soles by :mod:`motok_robot.sim.dynamics`);
+* ``collision_model``: the robot with all its collision-capable geoms made to collide with
+  each other and the floor removed, used to find self-collisions;
+* the robot's own ``model`` (untouched) for the physics rollout.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from motok_robot.errors import InputError
+
+SIDES = ("left", "right")
+
+
+@dataclass
+class RobotIndex:
+    """Ids and limits of one robot (arrays indexed by actuated joint j in ``joint_names`` order)."""
+
+    name: str
+    model: mujoco.MjModel
+    kin_model: mujoco.MjModel
+    collision_model: mujoco.MjModel
+    joint_names: list[str]
+    qpos_adr: np.ndarray        # int [nj]
+    dof_adr: np.ndarray         # int [nj]
+    joint_range: np.ndarray     # float [nj, 2] rad
+    velocity_limit: np.ndarray  # float [nj] rad/s
+    torque_limit: np.ndarray    # float [nj] N m
+    root_body: int              # body carrying the free joint
+    base_dof: np.ndarray        # int [6] qvel addresses of the free joint
+    sole_site: np.ndarray       # int [2] (left, right) sole-centre sites
+    corner_sites: np.ndarray    # int [2, 4] sole corner sites
+    sole_body: np.ndarray       # int [2]
+    actuator_joint: np.ndarray  # int [nu] index j driven by each actuator (-1: not a joint actuator)
+    actuator_is_position: np.ndarray  # bool [nu] position servo (ctrl = target angle) vs motor
+    nominal_qpos: np.ndarray    # float [nq]
+    height_m: float             # standing height at the nominal pose (top of the highest geom)
+    total_mass: float
+    ignored_body_pairs: set = field(default_factory=set)  # self-collision pairs touching at nominal
+
+    @property
+    def nj(self) -> int:
+        return len(self.joint_names)
+
+
+def _site_id(model, name: str, what: str) -> int:
+    sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
+    if sid < 0:
+        raise InputError(f"robot: {what} site '{name}' is not in the MJCF")
+    return sid
+
+
+def index_robot(robot) -> RobotIndex:
+    """Resolve ``robot`` (contract ``Robot``) into a :class:`RobotIndex`."""
+    model = robot.model
+    free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+    if not free:
+        raise InputError(f"robot '{robot.name}': validation needs a free-floating base (no free joint found)")
+    root_body = int(model.jnt_bodyid[free[0]])
+    base_dof = np.arange(model.jnt_dofadr[free[0]], model.jnt_dofadr[free[0]] + 6)
+
+    sole_site, corners, sole_body = [], [], []
+    for side in SIDES:
+        sole = robot.soles[side]
+        sid = _site_id(model, sole.site, f"{side} sole")
+        sole_site.append(sid)
+        if len(sole.corner_sites) != 4:
+            raise InputError(f"robot '{robot.name}': {side} sole needs 4 corner sites, has {len(sole.corner_sites)}")
+        corners.append([_site_id(model, c, f"{side} sole corner") for c in sole.corner_sites])
+        sole_body.append(int(model.site_bodyid[sid]))
+
+    joint_ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in robot.joint_names]
+    jindex = {jid: j for j, jid in enumerate(joint_ids)}
+    actuator_joint = np.full(model.nu, -1, dtype=int)
+    actuator_is_position = np.zeros(model.nu, dtype=bool)
+    for a in range(model.nu):
+        if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT:
+            actuator_joint[a] = jindex.get(int(model.actuator_trnid[a, 0]), -1)
+        # a position servo: force = kp*ctrl - kp*q - kv*qdot (affine bias with -kp on q)
+        actuator_is_position[a] = (model.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE
+                                   and model.actuator_biasprm[a, 1] < 0)
+
+    kin_model = copy.deepcopy(model)
+    kin_model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+
+    collision_model = copy.deepcopy(model)
+    robot_geom = collision_model.geom_bodyid != 0
+    capable = robot_geom & ((model.geom_contype | model.geom_conaffinity) != 0)
+    if capable.sum() < 2:  # a model with only visual geoms: use them all
+        capable = robot_geom
+    collision_model.geom_contype[:] = np.where(capable, 1, 0)
+    collision_model.geom_conaffinity[:] = np.where(capable, 1, 0)
+    collision_model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    collision_model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+
+    nominal = np.asarray(robot.nominal_qpos(), dtype=np.float64)
+    data = mujoco.MjData(kin_model)
+    data.qpos[:] = nominal
+    mujoco.mj_forward(kin_model, data)
+    top = data.geom_xpos[robot_geom, 2] + kin_model.geom_rbound[robot_geom]
+    height = float(top.max()) if top.size else 1.0
+
+    index = RobotIndex(
+        name=robot.name, model=model, kin_model=kin_model, collision_model=collision_model,
+        joint_names=list(robot.joint_names), qpos_adr=np.asarray(robot.qpos_adr, dtype=int),
+        dof_adr=np.asarray(robot.dof_adr, dtype=int),
+        joint_range=np.asarray(robot.joint_range, dtype=np.float64).reshape(-1, 2),
+        velocity_limit=np.asarray(robot.velocity_limit, dtype=np.float64).reshape(-1),
+        torque_limit=np.asarray(robot.torque_limit, dtype=np.float64).reshape(-1),
+        root_body=root_body, base_dof=base_dof, sole_site=np.array(sole_site),
+        corner_sites=np.array(corners), sole_body=np.array(sole_body),
+        actuator_joint=actuator_joint, actuator_is_position=actuator_is_position,
+        nominal_qpos=nominal, height_m=height, total_mass=float(kin_model.body_subtreemass[root_body]))
+    index.ignored_body_pairs = _touching_body_pairs(index, nominal)
+    return index
+
+
+def body_pairs_in_collision(index: RobotIndex, data: mujoco.MjData, min_depth: float) -> list[tuple[int, int, float]]:
+    """Self-collisions at the pose in ``data`` (``collision_model``): (body1, body2, depth m).
+
+    Pairs of a body and its direct parent, pairs touching at the nominal pose (structural
+    overlaps of the model) and contacts shallower than ``min_depth`` are left out.
+    """
+    m = index.collision_model
+    mujoco.mj_kinematics(m, data)
+    mujoco.mj_collision(m, data)
+    found: dict[tuple[int, int], float] = {}
+    for i in range(data.ncon):
+        con = data.contact[i]
+        depth = -float(con.dist)
+        if depth < min_depth:
+            continue
+        b1, b2 = int(m.geom_bodyid[con.geom1]), int(m.geom_bodyid[con.geom2])
+        pair = (min(b1, b2), max(b1, b2))
+        if b1 == b2 or m.body_parentid[b1] == b2 or m.body_parentid[b2] == b1:
+            continue
+        if pair in index.ignored_body_pairs:
+            continue
+        found[pair] = max(found.get(pair, 0.0), depth)
+    return [(a, b, d) for (a, b), d in found.items()]
+
+
+def _touching_body_pairs(index: RobotIndex, qpos: np.ndarray) -> set:
+    data = mujoco.MjData(index.collision_model)
+    data.qpos[:] = qpos
+    index.ignored_body_pairs = set()
+    return {(a, b) for a, b, _ in body_pairs_in_collision(index, data, min_depth=-1e-3)}

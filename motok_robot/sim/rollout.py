@@ -1,0 +1,196 @@
+"""Physics rollout: the robot tracks the trajectory with its own actuators.
+
+The robot starts at frame 0 (``qpos[0]``, base velocity and joint velocities from the
+reference's finite differences), with its free base, gravity and contacts, and its
+actuators receive the reference joint angles linearly interpolated from the clip's frame
+rate to the physics timestep (each step gets the target of the step's end time).
+
+Servo model: the robot's own actuators.  Position actuators (affine bias with a negative
+position gain: MuJoCo ``<position>``) get the target angle as control (times the
+transmission gear).  Plain motors are given a PD servo law on a copy of the model:
+``kp = motor_kp_per_nm x force limit`` (N m/rad), ``kd = motor_kd_ratio x kp``, their force
+limits kept.  The whole open-loop control sequence is known in advance, so the rollout runs
+in C with ``mujoco.rollout`` (no Python in the stepping loop).
+
+Fall detection (per physics step, relative to the reference so a deliberate squat or bow is
+no fall): the root body is lower than ``fall_height_ratio`` x the reference root height at
+that time, or its up axis is tilted more than ``fall_tilt_rad`` from the reference's up axis.
+
+Centre of pressure: sampled at ``cop_rate_hz``; the state is restored (``mj_setState``),
+``mj_forward`` recomputes the contacts, and the CoP is the normal-force weighted mean of the
+floor contact points.  It is compared with the support polygon of the simulated soles in
+contact (convex hull of their corner sites): a CoP outside means something other than the
+soles carries load; a CoP on the edge means the robot is tipping.
+
+Tracking RMSE and base drift are measured at the reference frame times before the fall
+(the whole clip when it does not fall).
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from mujoco import rollout as mj_rollout
+
+from motok_robot.sim.config import ValidationConfig
+from motok_robot.sim.dynamics import finite_difference_qvel
+from motok_robot.sim.geometry import convex_hull, signed_distance
+from motok_robot.sim.model_index import RobotIndex
+
+
+@dataclass
+class RolloutResult:
+    """What happened in physics.  Frame arrays are sampled at the reference frame times
+    (T frames at ``fps``); CoP arrays at ``cop_rate_hz`` (S samples)."""
+
+    fps: float
+    timestep: float                  # physics timestep (s)
+    qpos: np.ndarray                 # [T, nq] simulated qpos at the reference frame times
+    fell: bool
+    fall_time_s: float | None        # first time the fall criteria hold
+    fall_reason: str | None          # "height" or "tilt"
+    root_height: np.ndarray          # [T] m, simulated root body height
+    root_tilt: np.ndarray            # [T] rad, angle between simulated and reference up axes
+    tracking_error: np.ndarray       # [T, nj] rad, simulated - reference joint angle
+    tracking_rmse_per_joint: np.ndarray  # [nj] rad (frames before the fall)
+    tracking_rmse: float             # rad, RMS over joints and frames before the fall
+    base_drift: np.ndarray           # [T] m, horizontal root distance sim vs reference
+    cop_time: np.ndarray             # [S] s
+    cop: np.ndarray                  # [S, 2] m (NaN without floor contact)
+    cop_margin: np.ndarray           # [S] m, signed distance to the simulated sole polygon
+    cop_support: list                # S hulls [H, 2]
+    valid_frames: np.ndarray         # bool [T] frames before the fall
+    wall_s: float = 0.0
+
+
+def servo_model(index: RobotIndex, config: ValidationConfig) -> tuple[mujoco.MjModel, np.ndarray]:
+    """Copy of the robot model ready for tracking, and each actuator's gear [nu]."""
+    model = copy.deepcopy(index.model)
+    if config.physics_timestep_s > 0:
+        model.opt.timestep = config.physics_timestep_s
+    gear = model.actuator_gear[:, 0].copy()
+    gear[gear == 0] = 1.0
+    for a in range(model.nu):
+        if index.actuator_is_position[a] or index.actuator_joint[a] < 0:
+            continue
+        limit = float(np.max(np.abs(model.actuator_forcerange[a]))) if model.actuator_forcelimited[a] else 0.0
+        if limit <= 0:
+            limit = float(index.torque_limit[index.actuator_joint[a]])
+        kp = config.motor_kp_per_nm * limit
+        kd = config.motor_kd_ratio * kp
+        model.actuator_gaintype[a] = mujoco.mjtGain.mjGAIN_FIXED
+        model.actuator_gainprm[a, :3] = [kp / gear[a] ** 2, 0, 0]
+        model.actuator_biastype[a] = mujoco.mjtBias.mjBIAS_AFFINE
+        model.actuator_biasprm[a, :3] = [0.0, -kp / gear[a] ** 2, -kd / gear[a] ** 2]
+        model.actuator_ctrllimited[a] = 0
+    return model, gear
+
+
+def _up_axis(quat: np.ndarray) -> np.ndarray:
+    """World up axis [N, 3] of bodies with orientations ``quat`` [N, 4] (wxyz)."""
+    w, x, y, z = quat.T
+    return np.stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)], axis=1)
+
+
+def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: ValidationConfig) -> RolloutResult:
+    """Roll the robot out in physics tracking ``qpos`` [T, nq] (frames at ``fps``)."""
+    import time as _time
+
+    start = _time.perf_counter()
+    model, gear = servo_model(index, config)
+    dt = float(model.opt.timestep)
+    T = qpos.shape[0]
+    duration = (T - 1) / fps
+    nstep = max(1, int(round(duration / dt)))
+    ref_time = np.arange(T) / fps
+    step_end = (np.arange(nstep) + 1) * dt
+
+    # controls [nstep, nu]: target angle at each step's end time, times the gear
+    control = np.zeros((nstep, model.nu))
+    for a in range(model.nu):
+        j = index.actuator_joint[a]
+        if j < 0:
+            continue
+        target = np.interp(step_end, ref_time, qpos[:, index.qpos_adr[j]])
+        control[:, a] = gear[a] * target
+
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos[0]
+    qvel_ref = finite_difference_qvel(model, qpos[: min(T, 3)], fps)
+    data.qvel[:] = qvel_ref[0]
+    data.ctrl[:] = control[0]
+    mujoco.mj_forward(model, data)
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    initial = np.zeros(mujoco.mj_stateSize(model, spec))
+    mujoco.mj_getState(model, data, initial, spec)
+    states, _ = mj_rollout.rollout(model, data, initial[None], control[None])
+    states = states[0]  # [nstep, nstate] state after each step
+    all_qpos = states[:, 1:1 + model.nq]
+
+    # per-step fall detection against the reference interpolated at each step's end
+    ref_z = np.interp(step_end, ref_time, qpos[:, 2])
+    ref_quat = np.stack([np.interp(step_end, ref_time, qpos[:, 3 + i]) for i in range(4)], axis=1)
+    ref_quat /= np.linalg.norm(ref_quat, axis=1, keepdims=True)
+    up_sim = _up_axis(all_qpos[:, 3:7] / np.linalg.norm(all_qpos[:, 3:7], axis=1, keepdims=True))
+    up_ref = _up_axis(ref_quat)
+    tilt = np.arccos(np.clip((up_sim * up_ref).sum(1), -1.0, 1.0))
+    low = all_qpos[:, 2] < config.fall_height_ratio * ref_z
+    tilted = tilt > config.fall_tilt_rad
+    fallen = low | tilted
+    fell = bool(fallen.any())
+    fall_time = fall_reason = None
+    if fell:
+        first = int(np.argmax(fallen))
+        fall_time = float(step_end[first])
+        fall_reason = "height" if low[first] else "tilt"
+
+    # sample at the reference frame times (frame 0 = the initial state)
+    frame_step = np.clip(np.round(ref_time / dt).astype(int) - 1, -1, nstep - 1)
+    sim_qpos = np.where(frame_step[:, None] < 0, qpos[0][None], all_qpos[np.maximum(frame_step, 0)])
+    valid = np.ones(T, dtype=bool) if not fell else ref_time < fall_time
+    valid[0] = True
+    err = sim_qpos[:, index.qpos_adr] - qpos[:, index.qpos_adr]
+    rmse_joint = np.sqrt((err[valid] ** 2).mean(axis=0))
+    rmse = float(np.sqrt((err[valid] ** 2).mean()))
+    drift = np.linalg.norm(sim_qpos[:, :2] - qpos[:, :2], axis=1)
+    frame_tilt = np.interp(ref_time, step_end, tilt, left=0.0)
+
+    # centre of pressure
+    n_cop = max(2, int(round(duration * config.cop_rate_hz)) + 1)
+    cop_time = np.linspace(0.0, duration, n_cop)
+    cop_step = np.clip(np.round(cop_time / dt).astype(int) - 1, 0, nstep - 1)
+    cop = np.full((n_cop, 2), np.nan)
+    cop_margin = np.full(n_cop, np.nan)
+    hulls = []
+    floor_geoms = set(np.flatnonzero(model.geom_bodyid == 0).tolist())
+    force = np.zeros(6)
+    for s, step in enumerate(cop_step):
+        mujoco.mj_setState(model, data, states[step], spec)
+        data.ctrl[:] = control[step]
+        mujoco.mj_forward(model, data)
+        total, weighted = 0.0, np.zeros(2)
+        for i in range(data.ncon):
+            con = data.contact[i]
+            if (con.geom1 in floor_geoms) == (con.geom2 in floor_geoms):
+                continue
+            mujoco.mj_contactForce(model, data, i, force)
+            normal = force[0] * con.frame[2]  # world z of the normal force (frame row 0 = normal)
+            normal = abs(normal)
+            total += normal
+            weighted += normal * con.pos[:2]
+        corners = data.site_xpos[index.corner_sites]  # [2, 4, 3]
+        in_contact = corners[:, :, 2].min(axis=1) < config.contact_height_m
+        hull = convex_hull(corners[in_contact].reshape(-1, 3)[:, :2]) if in_contact.any() else np.zeros((0, 2))
+        hulls.append(hull)
+        if total > 1e-6:
+            cop[s] = weighted / total
+            if len(hull):
+                cop_margin[s] = signed_distance(cop[s], hull)
+    return RolloutResult(
+        fps=fps, timestep=dt, qpos=sim_qpos, fell=fell, fall_time_s=fall_time, fall_reason=fall_reason,
+        root_height=sim_qpos[:, 2], root_tilt=frame_tilt, tracking_error=err, tracking_rmse_per_joint=rmse_joint,
+        tracking_rmse=rmse, base_drift=drift, cop_time=cop_time, cop=cop, cop_margin=cop_margin,
+        cop_support=hulls, valid_frames=valid, wall_s=_time.perf_counter() - start)

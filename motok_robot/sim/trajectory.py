@@ -1,0 +1,130 @@
+"""Reading a ``robot.npz`` (see docs/CONTRACTS.md) and checking it against a robot.
+
+:func:`load_robot_npz` returns a :class:`RobotTrajectory`; every mismatch with the robot
+(wrong ``nq``, joint names or order, robot name, non-finite values, bad fps, too few frames)
+raises :class:`~motok_robot.errors.InputError` naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from motok_robot.errors import InputError
+
+
+@dataclass
+class RobotTrajectory:
+    """A joint-space trajectory of one robot.
+
+    qpos:        float64 [T, nq] MuJoCo qpos per frame (free base position m, quaternion wxyz,
+                 then hinge angles rad), in the robot model's qpos order.
+    fps:         frames per second.
+    joint_names: actuated joint names [nj], in qpos order (as in the file).
+    robot:       robot name recorded in the file ("" when absent).
+    contacts:    bool [T, 2] (left, right) foot contacts planned by retargeting, or None.
+    source:      where it came from (a path or a description).
+    """
+
+    qpos: np.ndarray
+    fps: float
+    joint_names: list[str]
+    robot: str = ""
+    contacts: np.ndarray | None = None
+    source: str = ""
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.qpos.shape[0])
+
+    @property
+    def duration_s(self) -> float:
+        return (self.num_frames - 1) / self.fps
+
+
+def load_robot_npz(path: str | Path, robot=None) -> RobotTrajectory:
+    """Read ``path`` (robot.npz) and, when ``robot`` is given, check it matches that robot."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such file")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            fields = {key: data[key] for key in data.files}
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
+        raise InputError(f"{path}: not a readable .npz file ({exc})") from None
+    for key in ("qpos", "fps"):
+        if key not in fields:
+            raise InputError(f"{path}: field '{key}' is missing (robot.npz needs qpos, fps, joint_names)")
+    qpos = np.asarray(fields["qpos"])
+    if qpos.ndim != 2 or not np.issubdtype(qpos.dtype, np.number):
+        raise InputError(f"{path}: field 'qpos' must be a number array [T, nq], got shape {qpos.shape} {qpos.dtype}")
+    qpos = qpos.astype(np.float64)
+    try:
+        fps = float(np.asarray(fields["fps"]).reshape(()))
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: field 'fps' must be one number") from None
+    names = [str(n) for n in np.asarray(fields.get("joint_names", np.array([], dtype=str))).reshape(-1)]
+    robot_name = str(np.asarray(fields["robot"]).reshape(())) if "robot" in fields else ""
+    contacts = None
+    if "contacts" in fields:
+        contacts = np.asarray(fields["contacts"]).astype(bool)
+        if contacts.shape != (qpos.shape[0], 2):
+            raise InputError(f"{path}: field 'contacts' has shape {contacts.shape}, expected ({qpos.shape[0]}, 2)")
+    trajectory = RobotTrajectory(qpos=qpos, fps=fps, joint_names=names, robot=robot_name,
+                                 contacts=contacts, source=str(path))
+    if robot is not None:
+        check_matches_robot(trajectory, robot, where=str(path))
+    return trajectory
+
+
+def check_matches_robot(trajectory: RobotTrajectory, robot, where: str = "trajectory") -> None:
+    """Raise :class:`InputError` naming the field when ``trajectory`` does not fit ``robot``."""
+    qpos = trajectory.qpos
+    nq = robot.model.nq
+    if qpos.ndim != 2 or qpos.shape[1] != nq:
+        raise InputError(
+            f"{where}: field 'qpos' has {qpos.shape[-1] if qpos.ndim else 0} columns but robot "
+            f"'{robot.name}' has nq={nq} (free base 7 + {nq - 7} joints)")
+    if qpos.shape[0] < 3:
+        raise InputError(f"{where}: field 'qpos' has {qpos.shape[0]} frames; validation needs at least 3")
+    bad = ~np.isfinite(qpos)
+    if bad.any():
+        frame, col = np.argwhere(bad)[0]
+        raise InputError(f"{where}: field 'qpos' is not finite at frame {frame}, column {col}")
+    if not (np.isfinite(trajectory.fps) and trajectory.fps > 0):
+        raise InputError(f"{where}: field 'fps' must be a positive number, got {trajectory.fps}")
+    if trajectory.joint_names:
+        expected = list(robot.joint_names)
+        got = list(trajectory.joint_names)
+        if got != expected:
+            missing = [n for n in expected if n not in got]
+            extra = [n for n in got if n not in expected]
+            if missing or extra:
+                detail = f"missing {missing[:5]}" if missing else ""
+                detail += ("; " if detail and extra else "") + (f"unknown {extra[:5]}" if extra else "")
+            else:
+                first = next(i for i, (a, b) in enumerate(zip(got, expected)) if a != b)
+                detail = f"order differs at index {first}: '{got[first]}' where robot has '{expected[first]}'"
+            raise InputError(f"{where}: field 'joint_names' does not match robot '{robot.name}': {detail}")
+    if trajectory.robot and trajectory.robot != robot.name:
+        raise InputError(
+            f"{where}: field 'robot' is '{trajectory.robot}' but validating against robot '{robot.name}' "
+            f"(pass --robot {trajectory.robot})")
+    quat = qpos[:, 3:7]
+    norms = np.linalg.norm(quat, axis=1)
+    if np.any(np.abs(norms - 1.0) > 1e-3):
+        frame = int(np.argmax(np.abs(norms - 1.0)))
+        raise InputError(f"{where}: field 'qpos' base quaternion (columns 3:7) is not unit length at frame {frame} "
+                         f"(norm {norms[frame]:.4f})")
+
+
+def save_robot_npz(path: str | Path, trajectory: RobotTrajectory) -> None:
+    """Write the fields validation reads (used by tests and the synthetic examples)."""
+    data = {"qpos": trajectory.qpos.astype(np.float64), "fps": np.float64(trajectory.fps),
+            "joint_names": np.array(trajectory.joint_names, dtype=str), "robot": np.array(trajectory.robot)}
+    if trajectory.contacts is not None:
+        data["contacts"] = trajectory.contacts.astype(bool)
+    np.savez(path, **data)
