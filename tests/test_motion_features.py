@@ -293,3 +293,25 @@ def test_resample_linear_interpolation():
     np.testing.assert_allclose(up[1], 0.5 * (clip[0] + clip[1]))
     with pytest.raises(InputError, match="positive"):
         F.resample(clip, 0, 20)
+
+
+# ----------------------------------------------------------------------------- dataset checker
+
+
+def test_roundtrip_checker_on_a_tiny_prepared_folder(tmp_path, capsys):
+    from motok_robot.motion import roundtrip
+
+    (tmp_path / "joints").mkdir()
+    (tmp_path / "features").mkdir()
+    for i, clip in enumerate([synthetic.walking_clip(30), synthetic.standing_clip(12)]):
+        norm = F.normalise_joints(clip).astype(np.float32)
+        np.save(tmp_path / "joints" / f"c{i}.npy", norm)
+        np.save(tmp_path / "features" / f"c{i}.npy", F.features_from_joints(norm))
+    out = tmp_path / "report.json"
+    assert roundtrip.main([str(tmp_path), "--json", str(out)]) == 0
+    assert "2 clips checked" in capsys.readouterr().out
+    # a clip whose features do not match its joints fails the check
+    bad = F.features_from_joints(synthetic.walking_clip(30, speed=2.0))
+    np.save(tmp_path / "features" / "c0.npy", bad)
+    assert roundtrip.main([str(tmp_path)]) == 1
+    assert roundtrip.main([str(tmp_path / "nothing")]) == 2
