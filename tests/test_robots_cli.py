@@ -13,7 +13,7 @@ def test_robots_list(capsys):
     out = capsys.readouterr().out
     assert "op3_like" in out and "humanoid25" in out
     row = next(line for line in out.splitlines() if line.startswith("op3_like"))
-    assert row.split()[1:3] == ["20", "3.24"]
+    assert row.split()[1:3] == ["20", "3.39"]
 
 
 def test_robots_show_prints_joints_limits_and_servo_map(capsys):
