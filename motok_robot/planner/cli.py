@@ -1,0 +1,157 @@
+"""CLI of the planning stage: ``motok-robot train planner`` and ``motok-robot generate``.
+
+Light module: torch and the models are imported inside the handlers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+from pathlib import Path
+
+from motok_robot.errors import InputError
+
+
+def register(commands, groups) -> None:
+    train = groups["train"].add_parser(
+        "planner",
+        help="train a masked (discrete diffusion) or autoregressive token planner",
+        description="Train a planner on a prepared dataset, tokenised once with a trained tokenizer. "
+        "Writes RUN/config.json, RUN/model.safetensors, a resumable RUN/checkpoint.safetensors and "
+        "RUN/metrics.csv (validation loss and token accuracy).",
+    )
+    train.add_argument("--data", required=True, type=Path, help="prepared dataset directory (motok-robot data prepare)")
+    train.add_argument("--tokenizer", required=True, type=Path, help="tokenizer run directory")
+    train.add_argument("--kind", choices=("masked", "ar"), default="masked", help="planner type (default masked)")
+    train.add_argument("--out", required=True, type=Path, help="run directory to write")
+    train.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
+    train.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+    train.add_argument("--steps", type=int, default=None, help="optimiser steps in total (default 20000)")
+    train.add_argument("--batch-size", type=int, default=None, help="clips per batch (default 64)")
+    train.add_argument("--val-every", type=int, default=None, help="steps between validation/checkpoints (default 500)")
+    train.add_argument("--text-encoder", default=None, help="'minilm' (default) or 'clip:/path/to/clip'")
+    train.add_argument("--config", type=Path, default=None,
+                       help="JSON file with optional 'planner' and 'train' sections overriding the defaults")
+    train.add_argument("--device", default=None, help="torch device (default cpu)")
+    train.set_defaults(func=_train)
+
+    gen = commands.add_parser(
+        "generate",
+        help="text -> motion.npz (joints, features, tokens) with the trained planner and tokenizer",
+        description="Generate human motion from a sentence. The same --seed gives the same file.",
+    )
+    gen.add_argument("text", nargs="?", default=None, help="the prompt, e.g. \"a person walks forward\"")
+    gen.add_argument("--seconds", type=float, default=None, help="duration (default: estimated from the text)")
+    gen.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    gen.add_argument("--planner", choices=("masked", "ar"), default="masked", help="planner (default masked)")
+    gen.add_argument("--cfg", type=float, default=None, help="classifier-free guidance scale (default 2.5)")
+    who = gen.add_mutually_exclusive_group()
+    who.add_argument("--action", default=None, help="generate an action label instead of text")
+    who.add_argument("--unconditional", action="store_true", help="generate without text")
+    gen.add_argument("--prompts", type=Path, default=None, help="file with one prompt per line (# comments); --out is a directory")
+    gen.add_argument("--out", required=True, type=Path, help="motion.npz, or a directory")
+    gen.add_argument("--tokenizer", type=Path, default=None, help="tokenizer run (default models/tokenizer)")
+    gen.add_argument("--planner-run", type=Path, default=None, help="planner run (default models/planner_<kind>)")
+    gen.add_argument("--steps", type=int, default=None, help="masked planner unmasking steps (default 10)")
+    gen.add_argument("--decoder-steps", type=int, default=None, help="tokenizer decoder steps (default: tokenizer's)")
+    gen.add_argument("--temperature", type=float, default=None, help="token sampling temperature (default 1; 0 = greedy)")
+    gen.add_argument("--top-k", type=int, default=None)
+    gen.add_argument("--top-p", type=float, default=None)
+    gen.add_argument("--trajectory", type=Path, default=None,
+                     help="root path to follow coarsely: .npy or .csv [T, 2|3] (x, y[, height]) metres at 20 fps")
+    gen.add_argument("--device", default="cpu")
+    gen.set_defaults(func=_generate)
+
+
+def _train(args: argparse.Namespace) -> int:
+    from motok_robot.planner.train import train_planner
+
+    planner_over, train_over = {}, {}
+    if args.config is not None:
+        if not args.config.is_file():
+            raise InputError(f"--config {args.config}: file not found")
+        try:
+            data = json.loads(args.config.read_text())
+        except json.JSONDecodeError as exc:
+            raise InputError(f"--config {args.config}: not valid JSON ({exc})") from None
+        if not isinstance(data, dict) or set(data) - {"planner", "train"}:
+            raise InputError(f"--config {args.config}: expected an object with 'planner' and/or 'train' sections")
+        planner_over = dict(data.get("planner", {}))
+        train_over = dict(data.get("train", {}))
+    for name, key in (("steps", "steps"), ("batch_size", "batch_size"), ("val_every", "val_every")):
+        value = getattr(args, name)
+        if value is not None:
+            if value < 1:
+                raise InputError(f"--{name.replace('_', '-')} must be >= 1 (got {value})")
+            train_over[key] = value
+    run = train_planner(args.data, args.tokenizer, args.kind, args.out, resume=args.resume, seed=args.seed,
+                        planner_overrides=planner_over, train_overrides=train_over,
+                        text_encoder=args.text_encoder, device=args.device)
+    print(f"planner run written to {run}")
+    return 0
+
+
+def read_prompts(path: Path) -> list[str]:
+    """Non-empty, non-comment lines of a prompts file."""
+    if not path.is_file():
+        raise InputError(f"--prompts {path}: file not found")
+    prompts = [ln.strip() for ln in path.read_text().splitlines()]
+    prompts = [p for p in prompts if p and not p.startswith("#")]
+    if not prompts:
+        raise InputError(f"--prompts {path}: no prompts (one per line, # starts a comment)")
+    return prompts
+
+
+def _read_trajectory(path: Path):
+    import numpy as np
+
+    if not path.is_file():
+        raise InputError(f"--trajectory {path}: file not found")
+    try:
+        arr = np.load(path, allow_pickle=False) if path.suffix == ".npy" else np.loadtxt(path, delimiter=",", ndmin=2)
+    except (ValueError, OSError) as exc:
+        raise InputError(f"--trajectory {path}: cannot read ({exc})") from None
+    if arr.ndim != 2 or arr.shape[1] not in (2, 3):
+        raise InputError(f"--trajectory {path}: expected [T, 2] or [T, 3] (x, y[, height]) metres, got {arr.shape}")
+    return arr
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "_", text.lower()).strip("_")[:48] or "motion"
+
+
+def _generate(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from motok_robot.planner.generate import load_generator
+
+    if args.prompts is not None and (args.text is not None or args.action or args.unconditional):
+        raise InputError("--prompts cannot be combined with a TEXT argument, --action or --unconditional")
+    if args.prompts is None and args.text is None and not args.action and not args.unconditional:
+        raise InputError("give a TEXT prompt, --prompts FILE, --action LABEL or --unconditional")
+    if args.seed < 0:
+        raise InputError(f"--seed must be >= 0 (got {args.seed})")
+    if args.seconds is not None and args.seconds <= 0:
+        raise InputError(f"--seconds must be positive (got {args.seconds:g})")
+    trajectory = _read_trajectory(args.trajectory) if args.trajectory is not None else None
+    gen = load_generator(args.planner, args.tokenizer, args.planner_run, args.device)
+    options = dict(seconds=args.seconds, seed=args.seed, cfg_scale=args.cfg, steps=args.steps,
+                   decoder_steps=args.decoder_steps, temperature=args.temperature, top_k=args.top_k,
+                   top_p=args.top_p, trajectory=trajectory)
+    if args.prompts is not None:
+        prompts = read_prompts(args.prompts)
+        if args.out.suffix == ".npz":
+            raise InputError(f"--out {args.out}: with --prompts, --out must be a directory")
+        for i, prompt in enumerate(tqdm(prompts, desc="generating", unit="prompt", disable=None)):
+            motion = gen.generate(text=prompt, **options)
+            motion.save(args.out / f"{i:03d}_{_slug(prompt)}.npz")
+        print(f"{len(prompts)} motions written to {args.out}")
+        return 0
+    out = args.out if args.out.suffix == ".npz" else args.out / "motion.npz"
+    motion = gen.generate(text=args.text, action=args.action, unconditional=args.unconditional, **options)
+    motion.save(out)
+    t = motion.timings
+    print(f"{out}: {motion.joints.shape[0]} frames ({motion.seconds:.2f} s), {len(motion.tokens)} tokens; "
+          f"text {t['text']:.3f} s, plan {t['plan']:.3f} s, decode {t['decode']:.3f} s")
+    return 0

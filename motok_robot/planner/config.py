@@ -1,0 +1,146 @@
+"""Planner configurations (dataclasses; every default lives here).
+
+* :class:`PlannerConfig` -- the architecture of one planner (masked or autoregressive) and its
+  condition encoders; saved as JSON next to the weights.
+* :class:`ControlConfig` -- how training derives coarse local conditions from the ground truth.
+* :class:`PlannerTrainConfig` -- optimisation, batching, validation, seeds.
+* :class:`SampleConfig` -- sampling defaults (guidance, steps, temperature, top-k / top-p).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from motok_robot.errors import InputError
+
+PLANNER_KINDS = ("masked", "ar")
+FORMAT = "motok-planner"
+FORMAT_VERSION = 1
+
+
+@dataclass
+class PlannerConfig:
+    """Architecture of a planner.
+
+    Token rate: ``fps / downsample`` tokens per second (5 at the defaults); the longest plan is
+    ``max_frames // downsample`` tokens (``max_frames / fps`` seconds).
+    """
+
+    kind: str = "masked"  #: "masked" (discrete diffusion) or "ar" (autoregressive)
+    codebook_size: int = 512  #: K, must equal the tokenizer's
+    downsample: int = 4  #: frames per token, must equal the tokenizer's
+    fps: int = 20  #: frames per second of the motion
+    max_frames: int = 240  #: longest motion the planner handles, frames (12 s at 20 fps)
+    width: int = 256  #: transformer width
+    layers: int = 4  #: transformer blocks
+    heads: int = 4  #: attention heads
+    ff_mult: int = 4  #: feed-forward width = ff_mult * width
+    dropout: float = 0.1
+    text_encoder: str = "minilm"  #: "minilm" or "clip:/path"
+    text_dim: int = 384  #: size of the text encoder's embedding (set from the encoder at training)
+    action_labels: list[str] = field(default_factory=list)  #: action classes with a learned embedding
+    local_hidden: int = 128  #: hidden width of the local-condition conv encoder
+    length_hidden: int = 256  #: hidden width of the length estimator MLP
+
+    @property
+    def max_tokens(self) -> int:
+        return self.max_frames // self.downsample
+
+    @property
+    def max_seconds(self) -> float:
+        return self.max_tokens * self.downsample / self.fps
+
+    def validate(self) -> "PlannerConfig":
+        if self.kind not in PLANNER_KINDS:
+            raise InputError(f"planner config: kind must be one of {PLANNER_KINDS} (got {self.kind!r})")
+        for name in ("codebook_size", "downsample", "fps", "max_frames", "width", "layers", "heads", "ff_mult",
+                     "text_dim", "local_hidden", "length_hidden"):
+            if int(getattr(self, name)) < 1:
+                raise InputError(f"planner config: {name} must be >= 1 (got {getattr(self, name)})")
+        if self.width % self.heads:
+            raise InputError(f"planner config: width {self.width} is not divisible by heads {self.heads}")
+        if self.max_tokens < 1:
+            raise InputError(f"planner config: max_frames {self.max_frames} < downsample {self.downsample}")
+        if not 0.0 <= self.dropout < 1.0:
+            raise InputError(f"planner config: dropout must be in [0, 1) (got {self.dropout})")
+        if len(set(self.action_labels)) != len(self.action_labels):
+            raise InputError("planner config: action_labels contains duplicates")
+        return self
+
+
+@dataclass
+class ControlConfig:
+    """Coarse control in training: which local conditions are derived from the ground truth.
+
+    Each training sample draws one mode with these probabilities (normalised): no local
+    condition, the root trajectory on the ground (with its height with ``height_prob``), a few
+    random joints on every frame, or random sparse keyframes of random joints.
+    """
+
+    none_prob: float = 0.4
+    root_prob: float = 0.3
+    joints_prob: float = 0.1
+    keyframes_prob: float = 0.2
+    height_prob: float = 0.5
+    max_random_joints: int = 3
+    max_keyframes: int = 5
+
+
+@dataclass
+class PlannerTrainConfig:
+    """Optimisation of a planner (``motok-robot train planner``)."""
+
+    seed: int = 0
+    steps: int = 20000  #: optimiser steps in total
+    batch_size: int = 64
+    lr: float = 3e-4
+    weight_decay: float = 0.01
+    warmup_steps: int = 500
+    grad_clip: float = 1.0
+    cond_drop_prob: float = 0.1  #: classifier-free guidance: global condition dropped for this fraction
+    length_loss_weight: float = 0.1  #: weight of the length estimator's loss
+    val_every: int = 500  #: steps between validation + checkpoint
+    val_batches: int = 20
+    device: str = "cpu"
+    control: ControlConfig = field(default_factory=ControlConfig)
+
+
+@dataclass
+class SampleConfig:
+    """Sampling defaults of :meth:`Planner.plan` and ``motok-robot generate``."""
+
+    cfg_scale: float = 2.5  #: classifier-free guidance scale (1 = plain conditional)
+    steps: int = 10  #: masked planner: unmasking iterations
+    temperature: float = 1.0  #: 0 = greedy
+    top_k: int | None = None
+    top_p: float | None = None
+    remask_noise: float = 1.0  #: masked planner: Gumbel noise on the re-masking confidence (annealed)
+    decoder_steps: int | None = None  #: tokenizer decoder DDIM steps (None = the tokenizer's default)
+
+
+def to_dict(cfg: Any) -> dict[str, Any]:
+    return dataclasses.asdict(cfg)
+
+
+def _from_dict(cls, data: dict[str, Any], where: str):
+    if not isinstance(data, dict):
+        raise InputError(f"{where}: expected a JSON object")
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise InputError(f"{where}: unknown field(s) {unknown}; known: {sorted(names)}")
+    return cls(**data)
+
+
+def planner_config_from_dict(data: dict[str, Any], where: str = "planner config") -> PlannerConfig:
+    return _from_dict(PlannerConfig, data, where).validate()
+
+
+def train_config_from_dict(data: dict[str, Any], where: str = "train config") -> PlannerTrainConfig:
+    data = dict(data)
+    control = _from_dict(ControlConfig, data.pop("control", {}) or {}, where + " 'control'")
+    cfg = _from_dict(PlannerTrainConfig, data, where)
+    cfg.control = control
+    return cfg

@@ -1,0 +1,310 @@
+"""Text -> motion: the planner writes MoTok tokens, the tokenizer's diffusion decoder turns them
+into features, and ``joints_from_features`` into joint positions.
+
+```python
+from motok_robot import generate
+motion = generate("a person walks forward", seconds=6, seed=0)        # GeneratedMotion
+motion.save("motion.npz")                                              # or generate(..., out="motion.npz")
+motion.joints   # float32 [T, 22, 3] metres, z up;  motion.features [T, 263];  motion.tokens [N]
+```
+
+Models are read from ``models/`` at the repository root by default (``models/tokenizer``,
+``models/planner_masked``, ``models/planner_ar``; override the folder with the environment
+variable ``MOTOK_ROBOT_MODELS`` or pass run directories).  Loaded models are kept per process,
+so repeated calls pay only for generation.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from motok_robot.errors import InputError
+from motok_robot.motion.skeleton import FPS
+from motok_robot.planner.config import PLANNER_KINDS, SampleConfig
+from motok_robot.text.base import MAX_TEXT_CHARS
+
+TRAIN_HINT = {
+    "tokenizer": "motok-robot train tokenizer --data DIR --out {path}",
+    "masked": "motok-robot train planner --data DIR --tokenizer models/tokenizer --kind masked --out {path}",
+    "ar": "motok-robot train planner --data DIR --tokenizer models/tokenizer --kind ar --out {path}",
+}
+
+
+def models_dir() -> Path:
+    """``$MOTOK_ROBOT_MODELS`` or ``models/`` at the repository root."""
+    env = os.environ.get("MOTOK_ROBOT_MODELS")
+    return Path(env) if env else Path(__file__).resolve().parents[2] / "models"
+
+
+def default_run(what: str) -> Path:
+    """Default run directory of ``"tokenizer"``, ``"masked"`` or ``"ar"``."""
+    return models_dir() / ("tokenizer" if what == "tokenizer" else f"planner_{what}")
+
+
+def _require_run(path: Path, what: str) -> None:
+    if not (path / "model.safetensors").is_file() or not (path / "config.json").is_file():
+        raise InputError(
+            f"no trained {'tokenizer' if what == 'tokenizer' else what + ' planner'} in {path} "
+            f"(config.json + model.safetensors); train one with: {TRAIN_HINT[what].format(path=path)}"
+        )
+
+
+@dataclass
+class GeneratedMotion:
+    """One generated clip.
+
+    Attributes:
+        joints: float32 ``[T, 22, 3]`` metres, z up, body starting at the origin facing +x.
+        features: float32 ``[T, 263]`` raw HumanML3D features.
+        tokens: int64 ``[N]`` MoTok token ids.
+        text: the prompt ("" for action/unconditional; ``"action:LABEL"`` for an action).
+        seed: the seed used.
+        model: identifiers of the models used.
+        fps: frames per second (20).
+        timings: seconds spent per stage (``text``, ``plan``, ``decode``, ``joints``).
+    """
+
+    joints: np.ndarray
+    features: np.ndarray
+    tokens: np.ndarray
+    text: str
+    seed: int
+    model: str
+    fps: int = FPS
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def seconds(self) -> float:
+        return self.joints.shape[0] / self.fps
+
+    def save(self, path: str | Path) -> Path:
+        """Write ``motion.npz`` (see :mod:`motok_robot.planner.motion_file`)."""
+        from motok_robot.planner.motion_file import save_motion
+
+        return save_motion(path, self.joints, self.features, self.tokens, self.text, self.seed, self.model, self.fps)
+
+
+def check_text(text: str) -> str:
+    if not isinstance(text, str):
+        raise InputError(f"text must be a string, got {type(text).__name__}")
+    clean = " ".join(text.split())
+    if not clean:
+        raise InputError("text is empty: give a sentence such as \"a person walks forward\" (or use --unconditional)")
+    if len(clean) > MAX_TEXT_CHARS:
+        raise InputError(f"text is {len(clean)} characters long; at most {MAX_TEXT_CHARS} are accepted")
+    return clean
+
+
+class MotionGenerator:
+    """Loaded tokenizer + planner + text encoder; call :meth:`generate` repeatedly.
+
+    Args:
+        planner: ``"masked"`` or ``"ar"`` (used when ``planner_run`` is None).
+        tokenizer_run, planner_run: run directories (default: ``models/``).
+        device: torch device.
+    """
+
+    def __init__(self, planner: str = "masked", tokenizer_run: str | Path | None = None,
+                 planner_run: str | Path | None = None, device: str = "cpu") -> None:
+        from motok_robot.planner.checkpoint import load_planner
+        from motok_robot.planner.data import file_digest
+        from motok_robot.text import load_text_encoder
+        from motok_robot.tokenizer import load_tokenizer
+
+        if planner not in PLANNER_KINDS:
+            raise InputError(f"planner must be one of {PLANNER_KINDS}, got {planner!r}")
+        tok_path = Path(tokenizer_run) if tokenizer_run else default_run("tokenizer")
+        plan_path = Path(planner_run) if planner_run else default_run(planner)
+        if tokenizer_run is None:
+            _require_run(tok_path, "tokenizer")
+        elif not tok_path.exists():
+            raise InputError(f"tokenizer run {tok_path} does not exist")
+        if planner_run is None:
+            _require_run(plan_path, planner)
+        elif not plan_path.exists():
+            raise InputError(f"planner run {plan_path} does not exist")
+        self.device = torch.device(device)
+        self.tokenizer = load_tokenizer(tok_path, device=self.device)
+        self.planner, run = load_planner(plan_path, device=self.device)
+        tok_file = (tok_path if tok_path.is_dir() else tok_path.parent) / "model.safetensors"
+        tok_hash = file_digest(tok_file)
+        expected = run.get("tokenizer", {}).get("sha256")
+        if expected and expected != tok_hash:
+            raise InputError(
+                f"planner {plan_path} was trained with another tokenizer (sha256 {expected}, "
+                f"{tok_file} has {tok_hash}); pass the matching --tokenizer or retrain the planner"
+            )
+        cfg = self.planner.config
+        if cfg.codebook_size != self.tokenizer.config.codebook_size or cfg.downsample != self.tokenizer.frames_per_token:
+            raise InputError(f"planner {plan_path} (K={cfg.codebook_size}, downsample={cfg.downsample}) does not match "
+                             f"tokenizer {tok_path} (K={self.tokenizer.config.codebook_size}, "
+                             f"downsample={self.tokenizer.frames_per_token})")
+        self.text_encoder = load_text_encoder(cfg.text_encoder, device=str(self.device))
+        if self.text_encoder.dim != cfg.text_dim:
+            raise InputError(f"text encoder {cfg.text_encoder!r} gives {self.text_encoder.dim}-d embeddings, "
+                             f"the planner expects {cfg.text_dim}")
+        self.kind = cfg.kind
+        self.model_id = (f"tokenizer={tok_path.name}@{tok_hash[:12]};"
+                         f"planner={cfg.kind}:{plan_path.name}@{file_digest(plan_path / 'model.safetensors')[:12]};"
+                         f"text={self.text_encoder.name.split('/')[-1]}")
+
+    @property
+    def max_seconds(self) -> float:
+        return self.planner.config.max_seconds
+
+    def frames_for(self, seconds: float) -> int:
+        if not isinstance(seconds, (int, float)) or isinstance(seconds, bool) or not math.isfinite(seconds):
+            raise InputError(f"seconds must be a number, got {seconds!r}")
+        if seconds <= 0:
+            raise InputError(f"seconds must be positive, got {seconds:g}")
+        if seconds > self.max_seconds + 1e-9:
+            raise InputError(f"seconds must be at most {self.max_seconds:g} for this planner, got {seconds:g}")
+        return max(1, round(seconds * self.planner.config.fps))
+
+    def generate(
+        self,
+        text: str | None = None,
+        seconds: float | None = None,
+        seed: int = 0,
+        cfg_scale: float | None = None,
+        action: str | None = None,
+        unconditional: bool = False,
+        steps: int | None = None,
+        decoder_steps: int | None = None,
+        temperature: float | None = None,
+        top_k: int | None = None,
+        top_p: float | None = None,
+        trajectory: np.ndarray | None = None,
+        keep_tokens: np.ndarray | None = None,
+    ) -> GeneratedMotion:
+        """Generate one motion; see :func:`generate` for the arguments."""
+        from motok_robot.motion.features import joints_from_features
+        from motok_robot.planner.conditions import Conditions, LocalConditions
+
+        defaults = SampleConfig()
+        cfg = self.planner.config
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise InputError(f"seed must be a non-negative integer, got {seed!r}")
+        given = sum(x for x in (text is not None, action is not None, bool(unconditional)))
+        if given != 1:
+            raise InputError("give exactly one of: a text prompt, an action label (--action), or --unconditional")
+        timings: dict[str, float] = {}
+        t0 = time.perf_counter()
+        cond = Conditions(batch=1)
+        label = ""
+        if text is not None:
+            label = check_text(text)
+            cond.text_embedding = self.text_encoder.encode([label]).to(self.device)
+        elif action is not None:
+            if action not in cfg.action_labels:
+                known = ", ".join(cfg.action_labels) or "none (this planner was trained without action labels)"
+                raise InputError(f"unknown action label {action!r}; known labels: {known}")
+            cond.action = torch.tensor([cfg.action_labels.index(action)], device=self.device)
+            label = f"action:{action}"
+        timings["text"] = time.perf_counter() - t0
+
+        ds = cfg.downsample
+        if seconds is None and trajectory is not None:
+            frames = int(np.asarray(trajectory).shape[0])
+            seconds = frames / cfg.fps
+        if seconds is not None:
+            frames = self.frames_for(seconds)
+            n_tokens = -(-frames // ds)
+        elif cond.text_embedding is not None:
+            n_tokens = int(self.planner.predict_length(cond)[0])
+            frames = n_tokens * ds
+        else:
+            frames = self.frames_for(6.0)
+            n_tokens = -(-frames // ds)
+        if trajectory is not None:
+            cond.local = LocalConditions.from_arrays(frames, trajectory=trajectory).to(self.device)
+
+        t1 = time.perf_counter()
+        tokens = self.planner.plan(
+            cond, n_tokens, seed=int(seed),
+            cfg_scale=defaults.cfg_scale if cfg_scale is None else float(cfg_scale),
+            temperature=defaults.temperature if temperature is None else float(temperature),
+            top_k=top_k if top_k is not None else defaults.top_k,
+            top_p=top_p if top_p is not None else defaults.top_p,
+            steps=steps or defaults.steps,
+            keep_tokens=None if keep_tokens is None else torch.as_tensor(keep_tokens)[None],
+            remask_noise=defaults.remask_noise,
+        )
+        timings["plan"] = time.perf_counter() - t1
+        t2 = time.perf_counter()
+        features = self.tokenizer.decode(tokens, length=frames, steps=decoder_steps or defaults.decoder_steps,
+                                         seed=int(seed))
+        timings["decode"] = time.perf_counter() - t2
+        t3 = time.perf_counter()
+        feats = features[0].detach().cpu().numpy().astype(np.float32)
+        joints = joints_from_features(feats).astype(np.float32)
+        timings["joints"] = time.perf_counter() - t3
+        return GeneratedMotion(joints=joints, features=feats, tokens=tokens[0].cpu().numpy().astype(np.int64),
+                               text=label, seed=int(seed), model=self.model_id, fps=int(cfg.fps), timings=timings)
+
+
+_GENERATORS: dict[tuple, MotionGenerator] = {}
+
+
+def load_generator(planner: str = "masked", tokenizer_run=None, planner_run=None, device: str = "cpu") -> MotionGenerator:
+    """A :class:`MotionGenerator`, reused per process for the same arguments."""
+    key = (planner, str(tokenizer_run), str(planner_run), str(device))
+    if key not in _GENERATORS:
+        _GENERATORS[key] = MotionGenerator(planner, tokenizer_run, planner_run, device)
+    return _GENERATORS[key]
+
+
+def generate(
+    text: str | None = None,
+    seconds: float | None = None,
+    seed: int = 0,
+    planner: str = "masked",
+    cfg_scale: float | None = None,
+    action: str | None = None,
+    unconditional: bool = False,
+    out: str | Path | None = None,
+    tokenizer_run: str | Path | None = None,
+    planner_run: str | Path | None = None,
+    steps: int | None = None,
+    decoder_steps: int | None = None,
+    temperature: float | None = None,
+    top_k: int | None = None,
+    top_p: float | None = None,
+    trajectory: np.ndarray | None = None,
+    device: str = "cpu",
+) -> GeneratedMotion:
+    """Generate a motion from a sentence (or an action label, or unconditionally).
+
+    Args:
+        text: the prompt (at most 500 characters).
+        seconds: duration (0 < seconds <= the planner's maximum, 12 s by default); None = estimated
+            from the text by the length estimator (6 s without text).
+        seed: seeds planning and decoding; the same seed gives the same motion (and file).
+        planner: "masked" (default) or "ar".
+        cfg_scale: classifier-free guidance scale (default 2.5; 1 = plain conditional).
+        action: an action label the planner was trained with (instead of text).
+        unconditional: generate without any global condition.
+        out: write ``motion.npz`` here as well.
+        tokenizer_run, planner_run: run directories (default ``models/``).
+        steps: masked planner unmasking steps (default 10); decoder_steps: DDIM steps of the decoder.
+        temperature, top_k, top_p: token sampling.
+        trajectory: ``[T, 2]`` or ``[T, 3]`` root path x, y (, height) in metres to follow coarsely (its
+            length sets T when ``seconds`` is None); NaN = free.
+        device: torch device.
+    Returns:
+        :class:`GeneratedMotion`.
+    """
+    gen = load_generator(planner, tokenizer_run, planner_run, device)
+    motion = gen.generate(text=text, seconds=seconds, seed=seed, cfg_scale=cfg_scale, action=action,
+                          unconditional=unconditional, steps=steps, decoder_steps=decoder_steps,
+                          temperature=temperature, top_k=top_k, top_p=top_p, trajectory=trajectory)
+    if out is not None:
+        motion.save(out)
+    return motion

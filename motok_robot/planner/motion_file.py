@@ -1,0 +1,87 @@
+"""``motion.npz`` -- the generation output (schema in docs/CONTRACTS.md), written reproducibly.
+
+Keys: ``joints`` float32 ``[T, 22, 3]`` (metres, z up), ``features`` float32 ``[T, 263]``, ``fps``
+(int), ``text`` (str; "" when unconditional), ``tokens`` int64 ``[N]``, ``seed`` (int), ``model``
+(str: identifiers of the models used). No object arrays: ``np.load(path)`` works with the default
+``allow_pickle=False``.
+
+The file is a zip written with fixed timestamps, so the same content gives byte-identical files
+(``numpy.savez`` stamps the current time), and it is written to a temporary name then renamed,
+so an interrupted run never leaves a truncated ``motion.npz``.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from motok_robot.errors import InputError
+from motok_robot.motion.skeleton import NUM_JOINTS
+
+_EPOCH = (1980, 1, 1, 0, 0, 0)
+
+
+def write_npz_reproducible(path: str | Path, arrays: dict[str, np.ndarray]) -> Path:
+    """Like ``numpy.savez`` but byte-for-byte reproducible and atomic."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".part")
+    with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_STORED) as zf:
+        for key in sorted(arrays):
+            buf = io.BytesIO()
+            np.lib.format.write_array(buf, np.asanyarray(arrays[key]), allow_pickle=False)
+            info = zipfile.ZipInfo(key + ".npy", date_time=_EPOCH)
+            info.external_attr = 0o644 << 16
+            zf.writestr(info, buf.getvalue())
+    os.replace(tmp, path)
+    return path
+
+
+def save_motion(path: str | Path, joints: np.ndarray, features: np.ndarray, tokens: np.ndarray, text: str,
+                seed: int, model: str, fps: int = 20) -> Path:
+    """Validate and write a ``motion.npz``."""
+    joints = np.asarray(joints, dtype=np.float32)
+    features = np.asarray(features, dtype=np.float32)
+    if joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3):
+        raise InputError(f"motion.npz joints must be [T, {NUM_JOINTS}, 3], got {joints.shape}")
+    if features.shape != (joints.shape[0], 263):
+        raise InputError(f"motion.npz features must be [{joints.shape[0]}, 263], got {features.shape}")
+    if not (np.isfinite(joints).all() and np.isfinite(features).all()):
+        raise InputError("motion.npz: joints/features contain NaN or inf (the models produced invalid output)")
+    arrays = {
+        "joints": joints,
+        "features": features,
+        "fps": np.array(int(fps)),
+        "text": np.array(str(text)),
+        "tokens": np.asarray(tokens, dtype=np.int64).reshape(-1),
+        "seed": np.array(int(seed)),
+        "model": np.array(str(model)),
+    }
+    return write_npz_reproducible(path, arrays)
+
+
+def load_motion(path: str | Path) -> dict[str, np.ndarray | str | int]:
+    """Read a ``motion.npz`` -> dict with numpy arrays and plain ``text``/``model``/``seed``/``fps``."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: motion file not found")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+    except (ValueError, OSError, zipfile.BadZipFile) as exc:
+        raise InputError(f"{path}: not a readable .npz file ({exc})") from None
+    for key in ("joints", "fps"):
+        if key not in data:
+            raise InputError(f"{path}: missing field {key!r}")
+    out: dict = dict(data)
+    for key in ("text", "model"):
+        if key in data:
+            out[key] = str(data[key])
+    for key in ("seed", "fps"):
+        if key in data:
+            out[key] = int(data[key])
+    return out

@@ -1,0 +1,211 @@
+"""Training loop of the planners (``motok-robot train planner``).
+
+Seeded (torch + numpy generators saved in the checkpoint, so a resumed run continues the same
+random stream), resumable after a kill (``--resume``), progress bar, periodic validation
+(loss and token accuracy, length-estimator accuracy) logged to ``RUN/metrics.csv``,
+safetensors checkpoints only.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from motok_robot.checkpoint import load_training_state, save_training_state
+from motok_robot.errors import InputError
+from motok_robot.planner.checkpoint import (
+    CONFIG_FILE, atomic_write_text, build_planner, read_run_config, save_planner_weights, write_run_config,
+)
+from motok_robot.planner.config import (
+    PlannerConfig, PlannerTrainConfig, planner_config_from_dict, to_dict, train_config_from_dict,
+)
+from motok_robot.planner.data import PlannerData, action_labels_of, file_digest, load_planner_data
+
+CHECKPOINT_FILE = "checkpoint.safetensors"
+STATE_FILE = "train_state.json"
+METRICS_FILE = "metrics.csv"
+METRIC_FIELDS = ["step", "lr", "train_loss", "train_accuracy", "val_loss", "val_accuracy", "val_length_loss",
+                 "val_length_within_1", "seconds"]
+
+
+def _lr_at(step: int, cfg: PlannerTrainConfig) -> float:
+    if step < cfg.warmup_steps:
+        return cfg.lr * (step + 1) / cfg.warmup_steps
+    progress = (step - cfg.warmup_steps) / max(1, cfg.steps - cfg.warmup_steps)
+    return cfg.lr * 0.5 * (1.0 + math.cos(math.pi * min(1.0, progress)))
+
+
+@torch.no_grad()
+def evaluate(model, data: PlannerData, cfg: PlannerTrainConfig, device) -> dict[str, float]:
+    """Validation loss / token accuracy (fixed seed, first crops, no control) + length estimator."""
+    model.eval()
+    rng = np.random.default_rng(1234)
+    gen = torch.Generator().manual_seed(1234)
+    totals = {"loss": 0.0, "acc": 0.0, "count": 0.0, "len_loss": 0.0, "len_ok": 0.0, "n": 0.0}
+    order = np.arange(len(data))
+    for start in range(0, min(len(data), cfg.val_batches * cfg.batch_size), cfg.batch_size):
+        idx = order[start:start + cfg.batch_size].tolist()
+        tokens, lengths, ends, cond, full = data.batch(idx, rng, None, random_crop=False)
+        out = model.loss(tokens.to(device), lengths.to(device), cond.to(device), gen, ends=ends.to(device))
+        c = float(out["count"])
+        totals["loss"] += float(out["loss"]) * c
+        totals["acc"] += float(out["accuracy"]) * c
+        totals["count"] += c
+        has_text = cond.text_present if cond.text_present is not None else torch.zeros(len(idx), dtype=torch.bool)
+        if cond.text_embedding is not None and bool(has_text.any()):
+            emb = cond.text_embedding[has_text].to(device)
+            target = full[has_text].to(device).clamp(1, model.config.max_tokens)
+            totals["len_loss"] += float(model.length_estimator.loss(emb, target)) * len(target)
+            pred = model.length_estimator.predict(emb)
+            totals["len_ok"] += float(((pred - target).abs() <= 1).sum())
+            totals["n"] += len(target)
+    model.train()
+    n = max(totals["n"], 1.0)
+    count = max(totals["count"], 1.0)
+    return {"val_loss": totals["loss"] / count, "val_accuracy": totals["acc"] / count,
+            "val_length_loss": totals["len_loss"] / n, "val_length_within_1": totals["len_ok"] / n}
+
+
+def train_planner(
+    data_dir: str | Path,
+    tokenizer_run: str | Path,
+    kind: str,
+    out_dir: str | Path,
+    resume: bool = False,
+    seed: int | None = None,
+    planner_overrides: dict | None = None,
+    train_overrides: dict | None = None,
+    text_encoder: str | None = None,
+    device: str | None = None,
+) -> Path:
+    """Train a planner of ``kind`` ("masked" | "ar") on a prepared dataset; returns the run directory."""
+    from motok_robot.text import load_text_encoder
+    from motok_robot.tokenizer import load_tokenizer
+
+    out = Path(out_dir)
+    ckpt = out / CHECKPOINT_FILE
+    if resume:
+        if not ckpt.is_file():
+            raise InputError(f"--resume: {ckpt} not found (start a new run without --resume)")
+        saved = read_run_config(out)
+        config = planner_config_from_dict(saved["planner"], where=f"{out / CONFIG_FILE} 'planner'")
+        train_cfg = train_config_from_dict(saved.get("train", {}), where=f"{out / CONFIG_FILE} 'train'")
+        if config.kind != kind:
+            raise InputError(f"--resume: {out} is a {config.kind!r} planner run, not {kind!r}")
+        if train_overrides and "steps" in train_overrides:
+            train_cfg.steps = int(train_overrides["steps"])  # allow extending a finished run
+    else:
+        if ckpt.is_file():
+            raise InputError(f"{out} already holds a planner run; pass --resume to continue it or choose another --out")
+        config = PlannerConfig(kind=kind)
+        train_cfg = PlannerTrainConfig()
+        if planner_overrides:
+            config = planner_config_from_dict({**to_dict(config), **planner_overrides, "kind": kind})
+        if train_overrides:
+            merged = {**to_dict(train_cfg), **train_overrides}
+            train_cfg = train_config_from_dict(merged)
+        if seed is not None:
+            train_cfg.seed = int(seed)
+        if text_encoder is not None:
+            config.text_encoder = text_encoder
+    if device is not None:
+        train_cfg.device = device
+    dev = torch.device(train_cfg.device)
+    torch.manual_seed(train_cfg.seed)
+
+    tok_dir = Path(tokenizer_run)
+    tokenizer = load_tokenizer(tok_dir, device=dev)
+    tok_weights = (tok_dir if tok_dir.is_dir() else tok_dir.parent) / "model.safetensors"
+    tokenizer_key = file_digest(tok_weights)
+    if resume and saved.get("tokenizer", {}).get("sha256") not in (None, tokenizer_key):
+        raise InputError(f"--resume: tokenizer {tok_weights} differs from the one this run was trained with")
+    encoder = load_text_encoder(config.text_encoder)
+    if not resume:
+        config = replace(config, codebook_size=tokenizer.config.codebook_size, downsample=tokenizer.frames_per_token,
+                         fps=int(getattr(tokenizer.config, "fps", config.fps)), text_dim=encoder.dim,
+                         action_labels=action_labels_of(data_dir, "train"))
+        config.validate()
+    extra = {"train": to_dict(train_cfg),
+             "tokenizer": {"path": str(tok_dir.resolve()), "sha256": tokenizer_key},
+             "text_encoder": encoder.name, "data": str(Path(data_dir).resolve())}
+    write_run_config(out, config, extra)
+
+    cache = out / "cache"
+    train_data = load_planner_data(data_dir, "train", tokenizer, tokenizer_key, encoder, cache,
+                                   config.action_labels, config.max_tokens)
+    try:
+        val_data = load_planner_data(data_dir, "val", tokenizer, tokenizer_key, encoder, cache,
+                                     config.action_labels, config.max_tokens)
+    except InputError:
+        val_data = train_data  # tiny datasets without a val split
+    del tokenizer
+
+    model = build_planner(config).to(dev)
+    decay = [p for n, p in model.named_parameters() if p.dim() >= 2]
+    no_decay = [p for n, p in model.named_parameters() if p.dim() < 2]
+    optimiser = torch.optim.AdamW([{"params": decay, "weight_decay": train_cfg.weight_decay},
+                                   {"params": no_decay, "weight_decay": 0.0}], lr=train_cfg.lr, betas=(0.9, 0.98))
+    generator = torch.Generator().manual_seed(train_cfg.seed)
+    rng = np.random.default_rng(train_cfg.seed)
+    step = 0
+    if resume:
+        step, extra_t = load_training_state(ckpt, model, optimiser)
+        if "torch_rng" in extra_t:
+            generator.set_state(extra_t["torch_rng"].to(torch.uint8))
+        state = json.loads((out / STATE_FILE).read_text()) if (out / STATE_FILE).is_file() else {}
+        if "numpy_rng" in state:
+            rng.bit_generator.state = state["numpy_rng"]
+    metrics_path = out / METRICS_FILE
+    if not metrics_path.is_file():
+        with open(metrics_path, "w", newline="") as fh:
+            csv.writer(fh).writerow(METRIC_FIELDS)
+
+    model.train()
+    t0 = time.time()
+    running_loss, running_acc, running_n = 0.0, 0.0, 0
+    bar = tqdm(total=train_cfg.steps, initial=step, desc=f"train planner ({kind})", unit="step", disable=None)
+    while step < train_cfg.steps:
+        lr = _lr_at(step, train_cfg)
+        for group in optimiser.param_groups:
+            group["lr"] = lr
+        idx = rng.integers(0, len(train_data), size=train_cfg.batch_size).tolist()
+        tokens, lengths, ends, cond, full = train_data.batch(idx, rng, train_cfg.control)
+        cond = cond.to(dev)
+        drop = torch.rand(len(idx), generator=generator) < train_cfg.cond_drop_prob
+        out_loss = model.loss(tokens.to(dev), lengths.to(dev), cond, generator, drop=drop.to(dev), ends=ends.to(dev))
+        loss = out_loss["loss"]
+        if cond.text_embedding is not None and cond.text_present is not None and bool(cond.text_present.any()):
+            has = cond.text_present
+            loss = loss + train_cfg.length_loss_weight * model.length_estimator.loss(
+                cond.text_embedding[has], full.to(dev)[has])
+        optimiser.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), train_cfg.grad_clip)
+        optimiser.step()
+        step += 1
+        running_loss += float(out_loss["loss"])
+        running_acc += float(out_loss["accuracy"])
+        running_n += 1
+        bar.update(1)
+        bar.set_postfix(loss=f"{float(out_loss['loss']):.3f}", acc=f"{float(out_loss['accuracy']):.3f}")
+        if step % train_cfg.val_every == 0 or step == train_cfg.steps:
+            metrics = evaluate(model, val_data, train_cfg, dev)
+            row = {"step": step, "lr": lr, "train_loss": running_loss / running_n,
+                   "train_accuracy": running_acc / running_n, **metrics, "seconds": time.time() - t0}
+            with open(metrics_path, "a", newline="") as fh:
+                csv.writer(fh).writerow([f"{row[k]:.6g}" if isinstance(row[k], float) else row[k] for k in METRIC_FIELDS])
+            running_loss, running_acc, running_n = 0.0, 0.0, 0
+            save_planner_weights(model, out)
+            save_training_state(ckpt, model, optimiser, step, extra={"torch_rng": generator.get_state()})
+            atomic_write_text(out / STATE_FILE, json.dumps({"numpy_rng": rng.bit_generator.state, "step": step}))
+            bar.write(f"step {step}: val loss {metrics['val_loss']:.4f}, token accuracy {metrics['val_accuracy']:.3f}")
+    bar.close()
+    return out

@@ -1,0 +1,246 @@
+"""Planner models: overfitting, guidance, causality, inpainting, local-condition alignment."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from motok_robot.errors import InputError
+from motok_robot.planner.autoregressive import ARPlanner
+from motok_robot.planner.checkpoint import build_planner
+from motok_robot.planner.conditions import Conditions, LocalConditions, random_local_conditions, stack_local
+from motok_robot.planner.config import ControlConfig, PlannerConfig
+from motok_robot.planner.masked import MaskedPlanner
+from motok_robot.planner.sampling import filter_logits, guided_logits
+
+torch.set_num_threads(1)
+
+K, D, N = 16, 8, 12
+
+
+def tiny(kind: str, **kw) -> PlannerConfig:
+    base = dict(kind=kind, codebook_size=K, downsample=4, max_frames=4 * 16, width=64, layers=2, heads=4,
+                ff_mult=2, dropout=0.0, text_dim=D, local_hidden=16, length_hidden=32)
+    base.update(kw)
+    return PlannerConfig(**base)
+
+
+def _data(n_seq: int = 4):
+    gen = torch.Generator().manual_seed(0)
+    tokens = torch.randint(0, K, (n_seq, N), generator=gen)
+    emb = torch.randn(n_seq, D, generator=gen)
+    lengths = torch.tensor([N, N, 9, 6][:n_seq])
+    return tokens, emb, lengths
+
+
+def _overfit(kind: str, steps: int = 300):
+    torch.manual_seed(0)
+    model = build_planner(tiny(kind))
+    tokens, emb, lengths = _data()
+    opt = torch.optim.Adam(model.parameters(), lr=3e-3)
+    gen = torch.Generator().manual_seed(0)
+    cond = Conditions(text_embedding=emb)
+    for _ in range(steps):
+        out = model.loss(tokens, lengths, cond, gen)
+        loss = out["loss"] + model.length_estimator.loss(emb, lengths)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    return model.eval(), tokens, emb, lengths
+
+
+@pytest.fixture(scope="module")
+def masked_fit():
+    return _overfit("masked")
+
+
+@pytest.fixture(scope="module")
+def ar_fit():
+    return _overfit("ar")
+
+
+def _expected(tokens, lengths):
+    out = tokens.clone()
+    for i, n in enumerate(lengths.tolist()):
+        out[i, n:] = -1
+    return out
+
+
+@pytest.mark.parametrize("fit", ["masked_fit", "ar_fit"])
+def test_tiny_planner_overfits_token_sequences(fit, request):
+    model, tokens, emb, lengths = request.getfixturevalue(fit)
+    planned = model.plan(Conditions(text_embedding=emb), lengths, seed=0, temperature=0.0, cfg_scale=1.0)
+    assert torch.equal(planned, _expected(tokens, lengths)[:, : int(lengths.max())])
+    # sampled (temperature 1) plans also reproduce memorised data, and the length estimator learned the lengths
+    sampled = model.plan(Conditions(text_embedding=emb), lengths, seed=3, temperature=1.0)
+    assert (sampled == _expected(tokens, lengths)).float().mean() > 0.9
+    assert torch.equal(model.length_estimator.predict(emb), lengths)
+
+
+def test_ar_planner_stops_at_its_end_token(ar_fit):
+    model, tokens, emb, lengths = ar_fit
+    planned = model.plan(Conditions(text_embedding=emb), None, seed=0, temperature=0.0)
+    assert torch.equal(planned, _expected(tokens, lengths)[:, : int(lengths.max())])
+
+
+def test_masked_predicts_length_from_text_when_not_given(masked_fit):
+    model, tokens, emb, lengths = masked_fit
+    planned = model.plan(Conditions(text_embedding=emb), None, seed=0, temperature=0.0)
+    assert torch.equal((planned >= 0).sum(1), lengths)
+
+
+@pytest.mark.parametrize("fit", ["masked_fit", "ar_fit"])
+def test_cfg_scale_one_equals_conditional_sampling(fit, request):
+    model, tokens, emb, lengths = request.getfixturevalue(fit)
+    cond = Conditions(text_embedding=emb)
+    plain = model.plan(cond, N, seed=5, temperature=1.0, cfg_scale=1.0)
+    guided_one = model.plan(cond, N, seed=5, temperature=1.0, cfg_scale=1.0, always_guide=True)
+    assert torch.equal(plain, guided_one)
+    # a real guidance scale changes the distribution (cond and null branches differ after training)
+    strong = [model.plan(cond, N, seed=s, temperature=1.0, cfg_scale=0.0) for s in range(3)]
+    assert any(not torch.equal(p, plain) for p in strong)
+
+
+def test_guided_logits_formula():
+    c, u = torch.randn(3, 7), torch.randn(3, 7)
+    assert torch.equal(guided_logits(c, u, 1.0), c)
+    assert torch.allclose(guided_logits(c, u, 0.0), u)
+    assert torch.allclose(guided_logits(c, u, 3.0), u + 3.0 * (c - u), atol=1e-6)
+
+
+def test_autoregressive_logits_are_causal():
+    torch.manual_seed(1)
+    model = ARPlanner(tiny("ar")).eval()
+    with torch.no_grad():  # make the (zero-initialised) local path active
+        for p in model.local_encoder.out.parameters():
+            p.normal_()
+    frames = N * 4
+    traj = np.cumsum(np.random.default_rng(0).normal(size=(frames, 2)) * 0.05, axis=0)
+    cond = Conditions(text_embedding=torch.randn(1, D), local=LocalConditions.from_arrays(frames, trajectory=traj))
+    a = torch.randint(0, K, (1, N))
+    for i in (0, 3, 7, N - 2):
+        b = a.clone()
+        b[:, i + 1:] = torch.randint(0, K, (1, N - i - 1))
+        la, lb = model.logits(a, cond, N), model.logits(b, cond, N)
+        # output j predicts token j (0-based) from tokens < j: outputs 0..i+1 only see tokens 0..i
+        assert torch.allclose(la[:, : i + 2], lb[:, : i + 2], atol=1e-5), i
+        assert not torch.allclose(la[:, i + 2:], lb[:, i + 2:], atol=1e-5)
+
+
+def test_ar_local_features_sit_at_the_preceding_position():
+    """A constraint on the frames of token t changes the prediction of token t, not of earlier tokens."""
+    torch.manual_seed(2)
+    model = ARPlanner(tiny("ar")).eval()
+    with torch.no_grad():
+        for p in model.local_encoder.out.parameters():
+            p.normal_()
+    frames, t = N * 4, 5
+    traj = np.full((frames, 2), np.nan)
+    traj[t * 4: (t + 1) * 4] = [1.0, 0.5]
+    tokens = torch.randint(0, K, (1, N))
+    text = torch.randn(1, D)
+    free = model.logits(tokens, Conditions(text_embedding=text, local=LocalConditions.empty(1, frames)), N)
+    held = model.logits(tokens, Conditions(text_embedding=text, local=LocalConditions.from_arrays(frames, trajectory=traj)), N)
+    assert torch.allclose(free[:, :t], held[:, :t], atol=1e-6)
+    assert not torch.allclose(free[:, t], held[:, t], atol=1e-4)
+
+
+def test_masked_sampling_keeps_given_tokens_exactly():
+    torch.manual_seed(3)
+    model = MaskedPlanner(tiny("masked")).eval()
+    gen = torch.Generator().manual_seed(0)
+    keep = torch.randint(0, K, (2, N), generator=gen)
+    mask = torch.rand(2, N, generator=gen) < 0.5
+    keep_tokens = torch.where(mask, keep, torch.full_like(keep, -1))
+    for seed in range(3):
+        out = model.plan(Conditions(text_embedding=torch.randn(2, D)), N, seed=seed, cfg_scale=2.0,
+                         keep_tokens=keep_tokens, steps=6)
+        assert torch.equal(out[mask], keep[mask])
+        assert ((out >= 0) & (out < K)).all()
+    with pytest.raises(InputError, match="kept ids"):
+        model.plan(Conditions(text_embedding=torch.randn(1, D)), N, keep_tokens=torch.full((N,), K + 3))
+
+
+@pytest.mark.parametrize("kind", ["masked", "ar"])
+def test_plan_is_seeded(kind):
+    torch.manual_seed(4)
+    model = build_planner(tiny(kind)).eval()
+    cond = Conditions(text_embedding=torch.randn(2, D))
+    a = model.plan(cond, N, seed=7, cfg_scale=2.0)
+    assert torch.equal(a, model.plan(cond, N, seed=7, cfg_scale=2.0))
+    assert not torch.equal(a, model.plan(cond, N, seed=8, cfg_scale=2.0))
+    assert a.shape == (2, N) and a.dtype == torch.long
+
+
+@pytest.mark.parametrize("kind", ["masked", "ar"])
+def test_action_and_null_conditions(kind):
+    model = build_planner(tiny(kind, action_labels=["walk", "run"])).eval()
+    out = model.plan(Conditions(action=torch.tensor([0, 1])), 4, seed=0)
+    assert out.shape == (2, 4)
+    out = model.plan(Conditions(batch=3), 4, seed=0)
+    assert out.shape == (3, 4)
+    g = model.global_encoder
+    assert torch.equal(g(Conditions(batch=2)), model.global_encoder.null.expand(2, -1))
+    with pytest.raises(InputError, match="out of range"):
+        model.plan(Conditions(action=torch.tensor([2])), 4)
+    with pytest.raises(InputError, match="n_tokens"):
+        model.plan(Conditions(batch=1), model.config.max_tokens + 1)
+
+
+def test_local_encoder_is_token_aligned_and_zero_where_unconstrained():
+    model = MaskedPlanner(tiny("masked"))
+    with torch.no_grad():
+        for p in model.local_encoder.out.parameters():
+            p.normal_()
+    frames = N * 4
+    traj = np.full((frames, 3), np.nan)
+    traj[8:12, :2] = 0.3  # frames of token 2
+    local = LocalConditions.from_arrays(frames, trajectory=traj)
+    m_s = model.local_encoder(local, N)
+    assert m_s.shape == (1, N, 64)
+    nonzero = m_s.abs().sum(-1)[0] > 0
+    assert nonzero.tolist() == [i == 2 for i in range(N)]
+
+
+def test_random_local_conditions_cover_every_mode():
+    rng = np.random.default_rng(0)
+    joints = np.random.default_rng(1).normal(size=(40, 22, 3)).astype(np.float32)
+    seen = set()
+    for _ in range(60):
+        lc = random_local_conditions(joints, ControlConfig(), rng)
+        root, jm = lc.root_mask[0].sum().item(), lc.joint_mask[0]
+        if root:
+            assert torch.allclose(lc.root[0, :, :2], torch.from_numpy(joints[:, 0, :2]))
+            seen.add("root")
+        elif jm.sum() == 0:
+            seen.add("none")
+        elif (jm.sum(0) == 40).any():
+            seen.add("joints")
+        else:
+            seen.add("keyframes")
+        given = jm.bool()
+        assert torch.allclose(lc.joints[0][given], torch.from_numpy(joints)[given])
+    assert seen == {"root", "none", "joints", "keyframes"}
+    both = stack_local([lc, lc])
+    assert both.batch_size == 2
+
+
+def test_local_condition_validation():
+    with pytest.raises(InputError, match="trajectory"):
+        LocalConditions.from_arrays(10, trajectory=np.zeros((10, 4)))
+    with pytest.raises(InputError, match="frames"):
+        LocalConditions.from_arrays(10, trajectory=np.zeros((9, 2)))
+    with pytest.raises(InputError, match="joint targets"):
+        LocalConditions.from_arrays(10, joints=np.zeros((10, 21, 3)))
+    with pytest.raises(InputError, match="more than"):
+        LocalConditions.empty(1, 20).fit_frames(10)
+
+
+def test_top_k_top_p_filtering():
+    logits = torch.tensor([[4.0, 3.0, 2.0, 1.0, 0.0]])
+    assert torch.isinf(filter_logits(logits, top_k=2)[0, 2:]).all()
+    assert torch.isfinite(filter_logits(logits, top_k=2)[0, :2]).all()
+    p = logits.softmax(-1)[0]
+    kept = torch.isfinite(filter_logits(logits, top_p=float(p[0]) + 1e-3)[0])
+    assert kept.tolist() == [True, True, False, False, False]
