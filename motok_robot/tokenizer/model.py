@@ -31,8 +31,6 @@ from motok_robot.tokenizer.sampler import EPS_X0_CLAMP, cosine_alpha_bar, ddim_s
 #: minimum std used for normalising (dims that are constant in the training data)
 STD_FLOOR = 1e-4
 
-#: foot joints (left ankle, left foot, right ankle, right foot) in the order of the contact bits 259:263
-_FOOT_JOINTS = (7, 10, 8, 11)
 _CONTACT_DIMS = slice(259, 263)
 
 
@@ -298,18 +296,19 @@ class MoTok(nn.Module):
         """MDM's geometric losses between raw feature batches ``[B, T, F]``: joint positions
         (m^2), joint velocities (m^2 / frame^2) and predicted foot velocity where the target's
         contact bit is set (m^2 / frame^2)."""
-        from motok_robot.motion.features_torch import joints_from_features
+        from motok_robot.motion.features_torch import foot_contact_velocity, joints_from_features
 
         j_hat = joints_from_features(predicted)
         j = joints_from_features(target)
-        v_hat = j_hat[:, 1:] - j_hat[:, :-1]
-        v = j[:, 1:] - j[:, :-1]
-        contact = (target[:, :-1, _CONTACT_DIMS] > 0.5).float()  # [B, T-1, 4]
-        foot_speed2 = v_hat[:, :, list(_FOOT_JOINTS)].pow(2).sum(-1)  # [B, T-1, 4]
+        v_hat = j_hat[..., 1:, :, :] - j_hat[..., :-1, :, :]
+        v = j[..., 1:, :, :] - j[..., :-1, :, :]
+        contacts = target[..., _CONTACT_DIMS]
+        foot_velocity = foot_contact_velocity(j_hat, contacts)  # [B, T-1, 4, 3], zero where no contact
+        on = (contacts[..., :-1, :] > 0.5).float()
         return {
             "joints": (j_hat - j).pow(2).sum(-1).mean(),
             "velocity": (v_hat - v).pow(2).sum(-1).mean(),
-            "foot": (foot_speed2 * contact).sum() / contact.sum().clamp_min(1.0),
+            "foot": foot_velocity.pow(2).sum(-1).sum() / on.sum().clamp_min(1.0),
         }
 
     def extra_repr(self) -> str:

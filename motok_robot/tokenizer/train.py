@@ -1,0 +1,327 @@
+"""Training of a MoTok tokenizer: windows of motion features -> AdamW on the tokenizer losses.
+
+Deterministic given ``TrainConfig.seed``: the initialisation uses ``torch.manual_seed(seed)``
+and every later random draw (windows, timesteps, noise, codebook restarts) a dedicated CPU
+``torch.Generator`` whose state is saved in the checkpoint, so a run killed and resumed
+with ``resume=True`` continues exactly as the uninterrupted run would (on CPU; CUDA kernels
+may differ in the last bits).
+
+Checkpoint = ``model.safetensors`` + ``config.json`` (see :mod:`.checkpoint`) +
+``train_state.safetensors`` (AdamW moments ``optim.<param index>.<key>``, the generator
+state ``rng``; step, epoch, running sums and the AdamW param groups as JSON metadata).
+Validation metrics go to ``metrics.csv``, one row per epoch.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from safetensors.torch import load_file
+from tqdm import tqdm
+
+from motok_robot.errors import InputError
+from motok_robot.tokenizer.checkpoint import CONFIG_FILE, WEIGHTS_FILE, atomic_save_tensors, read_run_config, save_tokenizer
+from motok_robot.tokenizer.config import TokenizerConfig, TrainConfig, to_dict, tokenizer_config_from_dict, train_config_from_dict
+from motok_robot.tokenizer.model import MoTok
+from motok_robot.tokenizer.quantizer import code_statistics
+
+STATE_FILE = "train_state.safetensors"
+METRICS_FILE = "metrics.csv"
+METRIC_COLUMNS = (
+    "epoch",
+    "step",
+    "lr",
+    "train_loss",
+    "train_reconstruction",
+    "train_commitment",
+    "train_perplexity",
+    "train_usage",
+    "val_feature_mse",
+    "val_mpjpe_cm",
+    "val_usage",
+    "val_perplexity",
+    "restarts",
+    "seconds",
+)
+_RUNNING = ("loss", "reconstruction", "commitment", "perplexity", "usage")
+
+
+@dataclass
+class Clips:
+    """Feature sequences of one split: ``features[i]`` float32 ``[T_i, F]`` (raw), ``ids[i]``."""
+
+    ids: list[str]
+    features: list[np.ndarray]
+
+
+class WindowSampler:
+    """Random fixed-length windows from clips at least ``window`` frames long."""
+
+    def __init__(self, clips: Clips, window: int, what: str = "train"):
+        keep = [i for i, f in enumerate(clips.features) if f.shape[0] >= window]
+        if not keep:
+            longest = max((f.shape[0] for f in clips.features), default=0)
+            raise InputError(f"{what} split: no clip has >= {window} frames (longest {longest}); lower the train window")
+        self.window = window
+        self.features = [clips.features[i] for i in keep]
+        self.skipped = len(clips.features) - len(keep)
+
+    def sample(self, batch: int, generator: torch.Generator) -> torch.Tensor:
+        """``[batch, window, F]`` float32: a clip uniformly, then a start frame uniformly."""
+        which = torch.randint(0, len(self.features), (batch,), generator=generator).tolist()
+        out = []
+        for i in which:
+            clip = self.features[i]
+            start = int(torch.randint(0, clip.shape[0] - self.window + 1, (1,), generator=generator))
+            out.append(clip[start : start + self.window])
+        return torch.from_numpy(np.stack(out)).float()
+
+
+def learning_rate(step: int, total: int, cfg: TrainConfig) -> float:
+    """Linear warm-up over ``warmup_steps``, then cosine decay to ``lr_min_ratio * lr`` at ``total``."""
+    if cfg.warmup_steps and step < cfg.warmup_steps:
+        return cfg.lr * (step + 1) / cfg.warmup_steps
+    span = max(total - cfg.warmup_steps, 1)
+    progress = min(max(step - cfg.warmup_steps, 0) / span, 1.0)
+    return cfg.lr * (cfg.lr_min_ratio + (1 - cfg.lr_min_ratio) * 0.5 * (1 + math.cos(math.pi * progress)))
+
+
+def joints_fn():
+    """Differentiable ``joints_from_features`` (torch) of the motion stage, or None if absent."""
+    try:
+        from motok_robot.motion.features_torch import joints_from_features
+    except ImportError:
+        return None
+    return joints_from_features
+
+
+# -- optimiser state <-> safetensors --------------------------------------------------------
+def _optimizer_tensors(optimizer: torch.optim.Optimizer) -> tuple[dict[str, torch.Tensor], list[dict[str, Any]]]:
+    sd = optimizer.state_dict()
+    tensors = {}
+    for idx, state in sd["state"].items():
+        for key, value in state.items():
+            tensors[f"optim.{idx}.{key}"] = value if torch.is_tensor(value) else torch.tensor(value)
+    return tensors, sd["param_groups"]
+
+
+def _load_optimizer(optimizer: torch.optim.Optimizer, tensors: dict[str, torch.Tensor], groups: list[dict[str, Any]]) -> None:
+    state: dict[int, dict[str, torch.Tensor]] = {}
+    for name, value in tensors.items():
+        if not name.startswith("optim."):
+            continue
+        _, idx, key = name.split(".", 2)
+        state.setdefault(int(idx), {})[key] = value
+    optimizer.load_state_dict({"state": state, "param_groups": groups})
+
+
+def _write_metrics(path: Path, rows: list[dict[str, Any]]) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with tmp.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=METRIC_COLUMNS)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: row.get(k, "") for k in METRIC_COLUMNS})
+    tmp.replace(path)
+
+
+def _read_metrics(path: Path) -> list[dict[str, Any]]:
+    if not path.is_file():
+        return []
+    with path.open() as fh:
+        return list(csv.DictReader(fh))
+
+
+# -- validation ----------------------------------------------------------------------------
+def validation_windows(clips: Clips, window: int, count: int, seed: int) -> torch.Tensor | None:
+    """A fixed set of up to ``count`` windows ``[n, window, F]`` from the val clips (or None)."""
+    usable = [f for f in clips.features if f.shape[0] >= window]
+    if not usable or count < 1:
+        return None
+    generator = torch.Generator().manual_seed(seed + 7919)
+    sampler = WindowSampler(Clips([str(i) for i in range(len(usable))], usable), window, "val")
+    return sampler.sample(count, generator)
+
+
+@torch.no_grad()
+def evaluate_windows(model: MoTok, windows: torch.Tensor, steps: int, batch: int = 32) -> dict[str, float]:
+    """Reconstruct ``windows [n, T, F]``: feature MSE (normalised units), MPJPE (cm, no
+    alignment; NaN when the motion stage's ``features_torch`` is not available), codebook usage
+    and perplexity of their tokens."""
+    was_training = model.training
+    model.eval()
+    fk = joints_fn()
+    sq, count, mpjpe_sum, tokens = 0.0, 0, 0.0, []
+    for start in range(0, windows.shape[0], batch):
+        x = windows[start : start + batch].to(model.device)
+        z = model.encode(x)
+        y = model.decode(z, length=x.shape[1], steps=steps, seed=start)
+        tokens.append(z.reshape(-1).cpu())
+        sq += float((model.normalise(y) - model.normalise(x)).pow(2).mean()) * x.shape[0]
+        if fk is not None:
+            mpjpe_sum += float((fk(y) - fk(x)).norm(dim=-1).mean()) * x.shape[0]
+        count += x.shape[0]
+    model.train(was_training)
+    stats = code_statistics(torch.cat(tokens), model.config.codebook_size)
+    return {
+        "val_feature_mse": sq / count,
+        "val_mpjpe_cm": 100.0 * mpjpe_sum / count if fk is not None else float("nan"),
+        "val_usage": float(stats["usage"]),
+        "val_perplexity": float(stats["perplexity"]),
+    }
+
+
+# -- training loop -------------------------------------------------------------------------
+def train_tokenizer(
+    train: Clips,
+    val: Clips | None,
+    mean: np.ndarray,
+    std: np.ndarray,
+    out: str | Path,
+    tokenizer_config: TokenizerConfig | None = None,
+    train_config: TrainConfig | None = None,
+    *,
+    resume: bool = False,
+    progress: bool | None = None,
+    stop_at: int | None = None,
+) -> dict[str, Any]:
+    """Train a tokenizer into run directory ``out``; return a summary dict.
+
+    ``resume=True`` continues from ``out``'s last checkpoint (its config.json wins over the
+    given configs, except for ``steps``/``epochs`` which may be raised to train longer).
+    ``stop_at`` ends the run after that step with a checkpoint (used to test resuming).
+    """
+    out = Path(out)
+    tok_cfg = tokenizer_config or TokenizerConfig()
+    cfg = train_config or TrainConfig()
+    state_path = out / STATE_FILE
+    if resume:
+        if not state_path.is_file():
+            raise InputError(f"{out}: nothing to resume ({STATE_FILE} not found)")
+        saved = read_run_config(out)
+        tok_cfg = tokenizer_config_from_dict(saved["tokenizer"], where=f"{out / CONFIG_FILE} 'tokenizer'")
+        saved_train = dict(saved.get("train") or {})
+        if train_config is not None:  # allow extending the run
+            saved_train["steps"] = train_config.steps or saved_train.get("steps", 0)
+            saved_train["epochs"] = train_config.epochs if not train_config.steps else saved_train.get("epochs", cfg.epochs)
+            saved_train["device"] = train_config.device
+            saved_train["num_threads"] = train_config.num_threads
+        cfg = train_config_from_dict(saved_train, where=f"{out / CONFIG_FILE} 'train'")
+    elif (out / WEIGHTS_FILE).exists() or state_path.exists():
+        raise InputError(f"{out}: already holds a tokenizer run; pass --resume to continue it or choose a new --out")
+    out.mkdir(parents=True, exist_ok=True)
+    if cfg.num_threads:
+        torch.set_num_threads(cfg.num_threads)
+    if cfg.device.startswith("cuda") and not torch.cuda.is_available():
+        raise InputError(f"train config: device {cfg.device!r} requested but CUDA is not available")
+    device = torch.device(cfg.device)
+
+    window = max(cfg.window - cfg.window % tok_cfg.downsample, tok_cfg.downsample)
+    sampler = WindowSampler(train, window, "train")
+    val_windows = validation_windows(val, window, cfg.val_clips, cfg.seed) if val is not None else None
+    steps_per_epoch = cfg.steps_per_epoch or max(1, math.ceil(len(sampler.features) / cfg.batch_size))
+    total = cfg.steps if cfg.steps > 0 else cfg.epochs * steps_per_epoch
+
+    torch.manual_seed(cfg.seed)
+    model = MoTok(tok_cfg, mean, std).to(device)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    generator = torch.Generator().manual_seed(cfg.seed)
+    step, running = 0, {k: 0.0 for k in _RUNNING}
+    running_n = 0
+    rows: list[dict[str, Any]] = []
+    if resume:
+        weights = load_file(str(out / WEIGHTS_FILE))
+        model.load_state_dict(weights)
+        tensors = load_file(str(state_path), device="cpu")
+        from safetensors import safe_open
+
+        with safe_open(str(state_path), framework="pt") as fh:
+            meta = fh.metadata() or {}
+        info = json.loads(meta["info"])
+        _load_optimizer(optimizer, {k: v.to(device) if not k.endswith(".step") else v for k, v in tensors.items()}, info["param_groups"])
+        generator.set_state(tensors["rng"])
+        step = int(info["step"])
+        running = {k: float(v) for k, v in info["running"].items()}
+        running_n = int(info["running_n"])
+        rows = [r for r in _read_metrics(out / METRICS_FILE) if int(r["step"]) <= step]
+    train_dict = to_dict(cfg)
+    model.train()
+
+    def checkpoint() -> None:
+        save_tokenizer(model, out, train=train_dict)
+        tensors, groups = _optimizer_tensors(optimizer)
+        tensors["rng"] = generator.get_state()
+        info = {"step": step, "running": running, "running_n": running_n, "param_groups": groups, "total": total}
+        atomic_save_tensors(tensors, state_path, metadata={"info": json.dumps(info)})
+        _write_metrics(out / METRICS_FILE, rows)
+
+    started = time.perf_counter()
+    bar = tqdm(total=total, initial=step, desc="train tokenizer", unit="step", disable=None if progress is None else not progress)
+    while step < total:
+        lr = learning_rate(step, total, cfg)
+        for group in optimizer.param_groups:
+            group["lr"] = lr
+        batch = sampler.sample(cfg.batch_size, generator).to(device)
+        losses = model.training_losses(batch, generator)
+        optimizer.zero_grad(set_to_none=True)
+        losses["loss"].backward()
+        if cfg.grad_clip > 0:
+            torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+        optimizer.step()
+        step += 1
+        for key in _RUNNING:
+            running[key] += float(losses[key].detach())
+        running_n += 1
+        bar.update(1)
+        bar.set_postfix(loss=f"{float(losses['loss'].detach()):.4f}", usage=f"{float(losses['usage']):.2f}")
+        epoch_end = step % steps_per_epoch == 0 or step == total
+        if epoch_end:
+            row: dict[str, Any] = {"epoch": math.ceil(step / steps_per_epoch), "step": step, "lr": lr}
+            for key in _RUNNING:
+                row[f"train_{key}"] = running[key] / max(running_n, 1)
+            if val_windows is not None:
+                row.update(evaluate_windows(model, val_windows, cfg.val_sample_steps))
+            row["restarts"] = int(model.quantizer.restarts)
+            row["seconds"] = round(time.perf_counter() - started, 2)
+            rows.append(row)
+            running, running_n = {k: 0.0 for k in _RUNNING}, 0
+        if epoch_end or step % cfg.checkpoint_every == 0 or step == stop_at:
+            checkpoint()
+        if stop_at is not None and step >= stop_at:
+            break
+    bar.close()
+    return {
+        "run": str(out),
+        "steps": step,
+        "total_steps": total,
+        "steps_per_epoch": steps_per_epoch,
+        "window": window,
+        "train_windows_from": len(sampler.features),
+        "train_clips_too_short": sampler.skipped,
+        "last": rows[-1] if rows else None,
+    }
+
+
+def load_split(data_dir: str | Path, split: str) -> Clips:
+    """Feature sequences of a prepared dataset split (via :class:`PreparedDataset`)."""
+    from motok_robot.data.dataset import PreparedDataset
+
+    dataset = PreparedDataset(data_dir, split)
+    ids = list(dataset.clip_ids)
+    return Clips(ids, [np.asarray(dataset.features(i), dtype=np.float32) for i in ids])
+
+
+def dataset_statistics(data_dir: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    from motok_robot.data.dataset import PreparedDataset
+
+    dataset = PreparedDataset(data_dir, "train")
+    return np.asarray(dataset.mean, dtype=np.float32), np.asarray(dataset.std, dtype=np.float32)
+

@@ -1,0 +1,279 @@
+"""MoTok tokenizer: shapes, codebook, save/load, emphasis projection, guidance hook, resume."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from safetensors.torch import load_file
+
+from motok_robot.errors import InputError
+from motok_robot.tokenizer import MoTok, TokenizerConfig, TrainConfig, load_tokenizer, pad_to_multiple, save_tokenizer
+from motok_robot.tokenizer.config import tokenizer_config_from_dict
+from motok_robot.tokenizer.emphasis import EmphasisProjection
+from motok_robot.tokenizer.quantizer import VectorQuantizer
+from motok_robot.tokenizer.sampler import GuidanceState, cosine_alpha_bar, ddim_timesteps
+from motok_robot.tokenizer.train import Clips, train_tokenizer
+
+torch.set_num_threads(1)
+
+TINY = dict(width=32, code_dim=16, codebook_size=16, denoiser_width=32, denoiser_blocks=2, depth=1, sample_steps=4)
+
+
+def smooth_features(batch: int, frames: int, seed: int = 0) -> torch.Tensor:
+    """Random smooth raw features ``[batch, frames, 263]`` (cumulative sums of noise, scaled)."""
+    rng = np.random.default_rng(seed)
+    x = np.cumsum(rng.normal(size=(batch, frames, 263)), axis=1) * 0.05 + rng.normal(size=(1, 1, 263))
+    return torch.from_numpy(x).float()
+
+
+def tiny(seed: int = 0, **overrides) -> MoTok:
+    torch.manual_seed(seed)
+    x = smooth_features(4, 32, seed)
+    flat = x.reshape(-1, 263)
+    return MoTok(TokenizerConfig(**{**TINY, **overrides}), flat.mean(0).numpy(), flat.std(0).numpy())
+
+
+def train_steps(model: MoTok, steps: int = 3, seed: int = 0) -> MoTok:
+    """A few optimisation steps so the EMA codebook and weights are not at their initial values."""
+    model.train()
+    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+    gen = torch.Generator().manual_seed(seed)
+    x = smooth_features(4, 32, seed)
+    for _ in range(steps):
+        loss = model.training_losses(x, gen)["loss"]
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    return model.eval()
+
+
+@pytest.mark.parametrize("downsample", [2, 4, 8])
+def test_encode_decode_shapes_and_dtypes(downsample):
+    model = tiny(downsample=downsample).eval()
+    x = smooth_features(2, 32)
+    tokens = model.encode(x)
+    assert tokens.shape == (2, 32 // downsample) and tokens.dtype == torch.int64
+    assert int(tokens.min()) >= 0 and int(tokens.max()) < model.config.codebook_size
+    assert model.frames_per_token == downsample
+    y = model.decode(tokens, length=32, steps=3)
+    assert y.shape == (2, 32, 263) and y.dtype == torch.float32 and torch.isfinite(y).all()
+    shorter = model.decode(tokens, length=30, steps=3)
+    assert shorter.shape == (2, 30, 263)
+    assert model.decode(tokens).shape == (2, 32, 263)  # length defaults to N * downsample
+
+
+def test_bad_inputs_raise_input_errors():
+    model = tiny().eval()
+    with pytest.raises(InputError, match="multiple of 4"):
+        model.encode(smooth_features(1, 30))
+    with pytest.raises(InputError, match=r"\[B, T, 263\]"):
+        model.encode(torch.zeros(30, 263))
+    bad = smooth_features(1, 32)
+    bad[0, 5, 7] = float("nan")
+    with pytest.raises(InputError, match="frame 5, dim 7"):
+        model.encode(bad)
+    with pytest.raises(InputError, match="token ids must be in 0..15"):
+        model.decode(torch.tensor([[0, 16]]))
+    with pytest.raises(InputError, match="length must be in 1..8"):
+        model.decode(torch.tensor([[0, 1]]), length=9)
+    with pytest.raises(InputError, match="unknown key"):
+        tokenizer_config_from_dict({"downsampel": 4})
+    with pytest.raises(InputError, match="decoder"):
+        TokenizerConfig(decoder="transformer")
+
+
+def test_pad_to_multiple_repeats_last_frame():
+    x = smooth_features(1, 30)
+    padded, length = pad_to_multiple(x, 4)
+    assert length == 30 and padded.shape == (1, 32, 263)
+    assert torch.equal(padded[:, 30], x[:, -1]) and torch.equal(padded[:, 31], x[:, -1])
+    model = tiny().eval()
+    assert model.reconstruct(x, steps=2).shape == (1, 30, 263)
+
+
+def test_dead_code_is_restarted_near_the_data():
+    vq = VectorQuantizer(codebook_size=8, code_dim=4, decay=0.5, dead_code_threshold=0.5)
+    gen = torch.Generator().manual_seed(0)
+    data = torch.randn(1, 64, 4, generator=gen)
+    vq.train()
+    vq(data, gen)  # initialises the codebook from the data
+    with torch.no_grad():  # move code 3 far away: it will never be chosen and its count decays
+        vq.codebook[3] = 100.0
+        vq.ema_sum[3] = 100.0
+    before = int(vq.restarts)
+    for _ in range(4):
+        vq(data, gen)
+    assert int(vq.restarts) > before
+    nearest_data = (data.reshape(-1, 4) - vq.codebook[3]).norm(dim=1).min()
+    assert nearest_data < 0.1, "the restarted code sits on an encoder output"
+    assert float(vq.ema_count[3]) > 0
+
+
+def test_quantizer_straight_through_and_commitment():
+    vq = VectorQuantizer(codebook_size=4, code_dim=2)
+    vq.train()
+    h = torch.randn(1, 10, 2, requires_grad=True)
+    out = vq(h, torch.Generator().manual_seed(1))
+    out.quantized.sum().backward()
+    assert torch.allclose(h.grad, torch.ones_like(h))  # straight-through: d q / d h = I
+    assert out.commitment.item() >= 0 and 1.0 <= out.perplexity.item() <= 4.0
+
+
+@pytest.mark.parametrize("overrides", [{}, {"parameterisation": "eps", "emphasis": True}, {"decoder": "conv"}])
+def test_save_load_gives_identical_outputs(tmp_path, overrides):
+    model = train_steps(tiny(**overrides))
+    save_tokenizer(model, tmp_path / "run")
+    loaded = load_tokenizer(tmp_path / "run", device="cpu")
+    assert loaded.config == model.config
+    x = smooth_features(2, 32, seed=5)
+    tokens = model.encode(x)
+    assert torch.equal(loaded.encode(x), tokens)
+    assert torch.equal(loaded.decode(tokens, steps=3, seed=2), model.decode(tokens, steps=3, seed=2))
+    assert torch.equal(loaded.mean, model.mean) and torch.equal(loaded.codebook, model.codebook)
+    data = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert data["format"] == "motok-tokenizer" and data["tokenizer"]["codebook_size"] == 16
+
+
+def test_load_errors_name_the_file(tmp_path):
+    with pytest.raises(InputError, match="not found"):
+        load_tokenizer(tmp_path / "missing")
+    save_tokenizer(tiny(), tmp_path / "run")
+    cfg = json.loads((tmp_path / "run" / "config.json").read_text())
+    cfg["tokenizer"]["codebook_size"] = 32
+    (tmp_path / "run" / "config.json").write_text(json.dumps(cfg))
+    with pytest.raises(InputError, match="model.safetensors"):
+        load_tokenizer(tmp_path / "run")
+    (tmp_path / "run" / "model.safetensors").write_bytes(b"not a safetensors file")
+    with pytest.raises(InputError, match="cannot read"):
+        load_tokenizer(tmp_path / "run")
+
+
+def test_emphasis_projection_invertible_and_variance_preserving():
+    proj = EmphasisProjection(263, (0, 1, 2, 3), c=5.0, seed=0)
+    eye = torch.eye(263, dtype=torch.float64)
+    assert (proj.inverse @ proj.matrix - eye).abs().max() < 1e-5
+    gen = torch.Generator().manual_seed(0)
+    x = torch.randn(20000, 263, generator=gen, dtype=torch.float64)
+    y = proj.project(x)
+    assert torch.allclose(proj.unproject(y), x, atol=1e-8)
+    var = y.var(dim=0)
+    # GMD: the scale sqrt(N - k + k c^2) makes the *expected* per-dimension variance 1
+    assert abs(float(var.mean()) - 1.0) < 0.05
+    assert float(var.min()) > 0.4 and float(var.max()) < 3.0
+    # the root dims are emphasised: each carries c^2 / (N - k + k c^2) of every output's variance
+    share = proj.matrix[:, :4].pow(2).sum() / proj.matrix.pow(2).sum()
+    assert abs(float(share) - 100 / (259 + 100)) < 0.05
+    # float32 tensors keep their dtype and round-trip closely
+    x32 = torch.randn(3, 10, 263)
+    assert proj.project(x32).dtype == torch.float32
+    assert torch.allclose(proj.unproject(proj.project(x32)), x32, atol=1e-4)
+
+
+def test_schedule_and_timesteps():
+    ab = cosine_alpha_bar(1000)
+    assert ab.shape == (1000,) and bool((ab[1:] < ab[:-1]).all())
+    assert ab[0] > 0.999 and ab[-1] < 1e-6
+    ts = ddim_timesteps(1000, 10)
+    assert ts[0] == 999 and ts[-1] == 0 and len(ts) == 10
+
+
+class InpaintRootHeight:
+    """Trivial guidance: overwrite raw feature dim 3 (root height) with a constant at every step."""
+
+    def __init__(self, height: float):
+        self.height = height
+        self.calls: list[GuidanceState] = []
+
+    def step(self, state: GuidanceState) -> None:
+        self.calls.append(state)
+        feats = state.to_features(state.x0_hat)
+        feats[..., 3] = self.height
+        state.x0_hat = state.from_features(feats)
+
+
+@pytest.mark.parametrize("overrides", [{}, {"parameterisation": "eps"}, {"emphasis": True}, {"emphasis": True, "parameterisation": "eps"}])
+def test_guidance_hook_is_applied(overrides):
+    model = train_steps(tiny(**overrides))
+    tokens = model.encode(smooth_features(2, 32))
+    free = model.decode(tokens, steps=5, seed=3)
+    hook = InpaintRootHeight(0.123)
+    guided = model.decode(tokens, steps=5, seed=3, guidance=hook)
+    assert len(hook.calls) == 5
+    assert [s.step for s in hook.calls] == list(range(5))
+    assert hook.calls[0].t == 999 and hook.calls[-1].t_prev == -1
+    assert hook.calls[-1].alpha_bar_prev == 1.0
+    assert torch.allclose(guided[..., 3], torch.full_like(guided[..., 3], 0.123), atol=1e-4)
+    assert not torch.allclose(free[..., 3], guided[..., 3], atol=1e-2)
+    # the denoise closure is differentiable (for GMD-style dense guidance)
+    state = hook.calls[2]
+    x = state.x_t.detach().requires_grad_()
+    with torch.enable_grad():
+        state.denoise(x).pow(2).sum().backward()
+    assert x.grad is not None and torch.isfinite(x.grad).all() and x.grad.abs().sum() > 0
+
+
+def test_callable_guidance_and_determinism():
+    model = train_steps(tiny())
+    tokens = torch.tensor([[1, 2, 3, 4]])
+    seen = []
+    a = model.decode(tokens, steps=3, seed=7, guidance=lambda state: seen.append(state.t))
+    b = model.decode(tokens, steps=3, seed=7)
+    c = model.decode(tokens, steps=3, seed=8)
+    assert len(seen) == 3 and torch.equal(a, b) and not torch.equal(a, c)
+    with pytest.raises(InputError, match="guidance"):
+        model.decode(tokens, guidance=42)
+    conv = tiny(decoder="conv").eval()
+    with pytest.raises(InputError, match="diffusion decoder"):
+        conv.decode(tokens, guidance=lambda s: None)
+
+
+def test_geometric_losses_use_joints():
+    model = tiny(joint_weight=1.0, velocity_weight=1.0, foot_weight=1.0)
+    from motok_robot.motion.features import features_from_joints
+    from motok_robot.motion.synthetic import walking_clip
+
+    x = torch.from_numpy(features_from_joints(walking_clip(frames=33))[None]).float()  # [1, 32, 263]
+    losses = model.training_losses(x, torch.Generator().manual_seed(0))
+    for key in ("joints", "velocity", "foot"):
+        assert key in losses and torch.isfinite(losses[key]) and losses[key] >= 0
+    losses["loss"].backward()
+    assert model.encoder.net[0].weight.grad is not None
+
+
+def _clips(n: int, frames: int, seed: int) -> Clips:
+    return Clips([f"c{i}" for i in range(n)], [smooth_features(1, frames, seed + i)[0].numpy() for i in range(n)])
+
+
+def test_resume_equals_uninterrupted_training(tmp_path):
+    train, val = _clips(4, 40, 0), _clips(2, 40, 10)
+    flat = np.concatenate(train.features)
+    mean, std = flat.mean(0), flat.std(0)
+    tok_cfg = TokenizerConfig(**TINY)
+    cfg = TrainConfig(seed=3, batch_size=2, window=16, lr=1e-3, warmup_steps=2, steps=6, steps_per_epoch=2,
+                      checkpoint_every=100, val_clips=2, val_sample_steps=2)
+    full = train_tokenizer(train, val, mean, std, tmp_path / "full", tok_cfg, cfg, progress=False)
+    assert full["steps"] == 6
+    part = train_tokenizer(train, val, mean, std, tmp_path / "part", tok_cfg, cfg, progress=False, stop_at=3)
+    assert part["steps"] == 3
+    with pytest.raises(InputError, match="--resume"):
+        train_tokenizer(train, val, mean, std, tmp_path / "part", tok_cfg, cfg, progress=False)
+    resumed = train_tokenizer(train, val, mean, std, tmp_path / "part", resume=True, progress=False)
+    assert resumed["steps"] == 6
+    a = load_file(str(tmp_path / "full" / "model.safetensors"))
+    b = load_file(str(tmp_path / "part" / "model.safetensors"))
+    assert a.keys() == b.keys()
+    for key in a:
+        assert torch.equal(a[key], b[key]), key
+    rows_a = (tmp_path / "full" / "metrics.csv").read_text().splitlines()
+    rows_b = (tmp_path / "part" / "metrics.csv").read_text().splitlines()
+    assert len(rows_a) == 4  # header + 3 epochs
+    strip = lambda rows: [",".join(r.split(",")[:-1]) for r in rows]  # noqa: E731 - drop wall time
+    assert strip(rows_a) == strip(rows_b)
+    # same seed, new run: deterministic
+    again = train_tokenizer(train, val, mean, std, tmp_path / "again", tok_cfg, cfg, progress=False)
+    assert again["steps"] == 6
+    c = load_file(str(tmp_path / "again" / "model.safetensors"))
+    assert all(torch.equal(a[k], c[k]) for k in a)
