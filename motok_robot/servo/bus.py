@@ -111,6 +111,10 @@ class ServoBus(abc.ABC):
     def read_present_positions(self, ids: Sequence[int]) -> np.ndarray:
         """Present Position (132) of ``ids`` in one sync read: int64 [len(ids)] ticks."""
 
+    def read_present_positions_each(self, ids: Sequence[int]) -> np.ndarray:
+        """Present Position of ``ids`` read servo by servo (slower; works with any Return Delay Time)."""
+        return np.concatenate([self.read_present_positions([int(i)]) for i in ids]) if len(ids) else np.zeros(0, np.int64)
+
     @abc.abstractmethod
     def write_goal_positions(self, ids: Sequence[int], ticks: np.ndarray) -> None:
         """Goal Position (116) of ``ids`` in one sync write; ``ticks`` int [len(ids)]."""

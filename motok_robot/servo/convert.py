@@ -1,11 +1,12 @@
 """Joint angles (rad) <-> servo ticks, per servo, from a robot's servo map.
 
-For servo ``i``::
+For servo ``i`` (the ``ServoSpec`` convention of :mod:`motok_robot.robots.description`)::
 
-    ticks = centre_i + zero_offset_i + sign_i * q * ticks_per_rev_i / (2 pi)
-    q     = sign_i * (ticks - centre_i - zero_offset_i) * 2 pi / ticks_per_rev_i
+    ticks = zero_offset_ticks_i + sign_i * q * ticks_per_rev_i / (2 pi)
+    q     = sign_i * (ticks - zero_offset_ticks_i) * 2 pi / ticks_per_rev_i
 
-with ``centre = ticks_per_rev / 2`` (X-series: 4096 ticks per turn, 2048 = 0 rad).  Commands
+``zero_offset_ticks`` is the servo position at q = 0: 2048 (horn centred; X-series: 4096
+ticks per turn) until ``motok-robot servo calibrate`` measures it.  Commands
 are limited to ``[min_ticks, max_ticks]``.  All functions are vectorised over a trailing
 servo axis: arrays are ``[..., n_servos]`` in the order of :attr:`ServoMap.ids`.
 """
@@ -30,7 +31,7 @@ class ServoMap:
         ids: servo IDs, int64 [n].
         models: servo model names ("XM430-W350").
         sign: +1 / -1, float64 [n] (direction of positive joint angle in ticks).
-        zero_offset: ticks added to the centre for q = 0, float64 [n].
+        zero_offset: servo position (ticks) at q = 0, float64 [n].
         min_ticks, max_ticks: command limits, int64 [n].
         ticks_per_rev: float64 [n].
         velocity_limit: rad/s, float64 [n].
@@ -84,9 +85,14 @@ class ServoMap:
     def n(self) -> int:
         return len(self.joints)
 
-    @property
-    def centre(self) -> np.ndarray:
-        return self.ticks_per_rev / 2.0
+    def select(self, columns: Sequence[int]) -> "ServoMap":
+        """The servos at ``columns`` (indices into this map), in that order."""
+        cols = list(columns)
+        return ServoMap(
+            joints=tuple(self.joints[c] for c in cols), ids=self.ids[cols], models=tuple(self.models[c] for c in cols),
+            sign=self.sign[cols], zero_offset=self.zero_offset[cols], min_ticks=self.min_ticks[cols],
+            max_ticks=self.max_ticks[cols], ticks_per_rev=self.ticks_per_rev[cols],
+            velocity_limit=self.velocity_limit[cols])
 
     @property
     def names_by_id(self) -> dict[int, str]:
@@ -95,7 +101,7 @@ class ServoMap:
     def ticks_float(self, q: np.ndarray) -> np.ndarray:
         """Unrounded, unclamped ticks of joint angles ``q`` [..., n] rad (NaN stays NaN)."""
         q = np.asarray(q, dtype=np.float64)
-        return self.centre + self.zero_offset + self.sign * q * (self.ticks_per_rev / (2.0 * np.pi))
+        return self.zero_offset + self.sign * q * (self.ticks_per_rev / (2.0 * np.pi))
 
     def to_ticks(self, q: np.ndarray) -> np.ndarray:
         """Joint angles [..., n] rad -> int64 ticks [..., n], clamped to [min_ticks, max_ticks].
@@ -112,7 +118,7 @@ class ServoMap:
     def to_rad(self, ticks: np.ndarray) -> np.ndarray:
         """Ticks [..., n] -> joint angles [..., n] rad (float64)."""
         ticks = np.asarray(ticks, dtype=np.float64)
-        return self.sign * (ticks - self.centre - self.zero_offset) * (2.0 * np.pi / self.ticks_per_rev)
+        return self.sign * (ticks - self.zero_offset) * (2.0 * np.pi / self.ticks_per_rev)
 
     def step_limit_ticks(self, dt: float, margin: float = 1.0) -> np.ndarray:
         """Largest per-tick change (int64 ticks [n], >= 1) that keeps |velocity| <= margin * limit."""

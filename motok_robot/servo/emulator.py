@@ -315,6 +315,18 @@ class EmulatedServoChain(PortHandler):
         self.packet_start_time = self.getCurrentTime()
         self.packet_timeout = self.tx_time_per_byte * packet_length + 2.0 * self.latency_timer_ms + 2.0
 
+    def isPacketTimeout(self):  # noqa: N802
+        # A reply that reached the wire before the deadline is not a timeout, even when this
+        # process was descheduled past the deadline before reading it (the SDK checks the time
+        # after an empty read without reading again; on a loaded machine that misfires).
+        if self.getTimeSinceStart() <= self.packet_timeout:
+            return False
+        deadline = (self.packet_start_time + self.packet_timeout) / 1000.0
+        if self._rx or any(ready <= deadline for ready, _ in self._pending):
+            return False
+        self.packet_timeout = 0
+        return True
+
     def getCurrentTime(self):  # noqa: N802 (monotonic ms)
         return time.perf_counter() * 1000.0
 
@@ -483,3 +495,20 @@ class EmulatedServoChain(PortHandler):
         for servo, position in noisy:
             out = self._corrupt(servo, out, position)
         self._pending.append((ready, out))
+
+
+def emulated_chain(servo_map, *, baud: int = 2_000_000, positions: Sequence[float] | None = None,
+                   clock: Callable[[], float] = time.perf_counter, **kwargs) -> EmulatedServoChain:
+    """An emulated chain matching a :class:`~motok_robot.servo.convert.ServoMap`.
+
+    Same IDs and models, Min/Max Position Limit registers = the map's tick limits, servos
+    listening at ``baud``, starting at ``positions`` (ticks [n]; default: the zero pose).
+    """
+    start = servo_map.zero_ticks() if positions is None else positions
+    servos = [
+        EmulatedServo(int(servo_id), model=model, position=float(p), min_position=int(lo), max_position=int(hi),
+                      baud=baud)
+        for servo_id, model, p, lo, hi in zip(servo_map.ids, servo_map.models, start, servo_map.min_ticks,
+                                               servo_map.max_ticks)
+    ]
+    return EmulatedServoChain(servos, clock=clock, **kwargs)

@@ -1,0 +1,202 @@
+"""``motok-robot play`` and ``motok-robot servo scan|calibrate`` (light: heavy imports in handlers)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def register(commands, groups) -> None:
+    play = commands.add_parser(
+        "play", help="stream a validated robot.npz to Dynamixel servos (or an emulated chain / the simulator)",
+        description="Stream robot.npz to the servos at a fixed rate: report gate, pre-flight, ramp to frame 0, "
+                    "clamped streaming, safe stop. Exits non-zero with one line naming the servo on a fault.")
+    play.add_argument("trajectory", help="robot.npz (retargeting output)")
+    play.add_argument("--robot", help="robot name or NAME.toml (default: the robot named in robot.npz)")
+    play.add_argument("--port", help="serial device, e.g. /dev/ttyUSB0 (not needed with --dry-run / --sim)")
+    play.add_argument("--baud", type=int, help="baud rate (default: the robot's bus, 2000000 for op3_like)")
+    play.add_argument("--rate", type=float, help="control rate in Hz (default: the robot's bus, 125)")
+    mode = play.add_mutually_exclusive_group()
+    mode.add_argument("--dry-run", action="store_true", help="play to an emulated servo chain (no hardware)")
+    mode.add_argument("--sim", action="store_true", help="play on the MuJoCo model in real time (no hardware)")
+    play.add_argument("--log", help="CSV log (default: <trajectory>.playback.csv next to robot.npz)")
+    play.add_argument("--report", help="validation report (default: report.json next to robot.npz)")
+    play.add_argument("--force", action="store_true", help="play without a passing validation report (warns)")
+    play.add_argument("--ramp", type=float, default=None, help="seconds to ramp from the present pose to frame 0 (2)")
+    play.add_argument("--retries", type=int, default=None, help="consecutive failed ticks tolerated (3)")
+    play.add_argument("--torque-off-on-stop", action="store_true",
+                      help="on a fault or Ctrl-C switch torque off instead of holding position")
+    play.add_argument("--render", help="with --sim: record the simulated playback to this MP4/GIF")
+    play.set_defaults(func=_play)
+
+    servo = groups["servo"]
+    scan = servo.add_parser("scan", help="list the servos on a bus: IDs, models, present positions")
+    scan.add_argument("--port", help="serial device, e.g. /dev/ttyUSB0")
+    scan.add_argument("--baud", type=int, default=2_000_000, help="baud rate (2000000)")
+    scan.add_argument("--emulate", metavar="ROBOT", help="scan an emulated chain of ROBOT's servos (no hardware)")
+    scan.set_defaults(func=_scan)
+
+    calibrate = servo.add_parser(
+        "calibrate", help="record zero offsets: pose the robot in its zero pose, write a calibrated servo map",
+        description="With torque off, put the robot in its zero pose (all joint angles 0) by hand; the present "
+                    "positions become zero_offset_ticks (min/max ticks move with them) in a copy of the robot "
+                    "description written to --out.")
+    calibrate.add_argument("--robot", required=True, help="robot name or NAME.toml")
+    calibrate.add_argument("--port", help="serial device, e.g. /dev/ttyUSB0")
+    calibrate.add_argument("--baud", type=int, help="baud rate (default: the robot's bus)")
+    calibrate.add_argument("--out", required=True, help="calibrated copy of the description (NAME.toml)")
+    calibrate.add_argument("--yes", action="store_true", help="do not wait for Enter (the robot is already posed)")
+    calibrate.add_argument("--emulate", action="store_true", help="calibrate against an emulated chain (no hardware)")
+    calibrate.set_defaults(func=_calibrate)
+
+
+def _warnings_as_lines():
+    import warnings
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        print(f"motok-robot: warning: {message}", file=sys.stderr)
+
+    warnings.showwarning = show
+    warnings.simplefilter("always")
+
+
+def _robot_name_from_npz(path: Path) -> str | None:
+    import numpy as np
+
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return str(data["robot"]) if "robot" in data.files else None
+    except Exception:
+        return None
+
+
+def _play(args: argparse.Namespace) -> int:
+    import os
+
+    if args.render:
+        os.environ.setdefault("MUJOCO_GL", "egl")
+    from motok_robot.errors import InputError
+    from motok_robot.robots import load
+    from motok_robot.servo.bus import DynamixelBus
+    from motok_robot.servo.config import ON_STOP_HOLD, ON_STOP_TORQUE_OFF, PlaybackConfig
+    from motok_robot.servo.convert import ServoMap
+    from motok_robot.servo.emulator import emulated_chain
+    from motok_robot.servo.streamer import PlaybackInterrupted, Streamer, check_validation_report, load_trajectory
+
+    _warnings_as_lines()
+    path = Path(args.trajectory)
+    if not path.is_file():
+        raise InputError(f"{path}: no such trajectory file")
+    robot_name = args.robot or _robot_name_from_npz(path)
+    if not robot_name:
+        raise InputError(f"{path}: no 'robot' field; pass --robot NAME")
+    if not (args.dry_run or args.sim) and not args.port:
+        raise InputError("--port DEV is required (or --dry-run / --sim to play without hardware)")
+    if args.render and not args.sim:
+        raise InputError("--render needs --sim")
+    robot = load(robot_name)
+    check_validation_report(path, args.report, force=args.force, robot_name=robot.name)
+    servo_map = ServoMap.from_specs(robot.servos)
+    trajectory = load_trajectory(path, servo_map, robot.name)
+    bus_spec = robot.bus
+    baud = args.baud or (bus_spec.baud if bus_spec else 2_000_000)
+    defaults = PlaybackConfig()
+    config = PlaybackConfig(
+        rate_hz=args.rate or (bus_spec.control_hz if bus_spec else defaults.rate_hz),
+        ramp_s=defaults.ramp_s if args.ramp is None else args.ramp,
+        retry_budget=defaults.retry_budget if args.retries is None else args.retries,
+        on_stop=ON_STOP_TORQUE_OFF if args.torque_off_on_stop else ON_STOP_HOLD,
+    )
+    log_path = Path(args.log) if args.log else path.with_name(path.stem + ".playback.csv")
+    rig = None
+    if args.sim:
+        from motok_robot.servo.sim_rig import SimRig
+
+        bus = rig = SimRig(robot, render_path=args.render)
+    elif args.dry_run:
+        bus = DynamixelBus(f"emulated:{robot.name}", baud, port_handler=emulated_chain(servo_map, baud=baud))
+    else:
+        bus = DynamixelBus(args.port, baud)
+    try:
+        streamer = Streamer(bus, servo_map, config, log_path=log_path)
+        streamer.preflight()
+        result = streamer.play(trajectory)
+    except PlaybackInterrupted as exc:
+        print(f"motok-robot: {exc}", file=sys.stderr)
+        return 130
+    finally:
+        bus.close()
+    print(result.line())
+    if rig is not None:
+        state = "FELL" if rig.fell else "stayed upright"
+        print(f"simulated robot {state}: base height {rig.start_base_height:.3f} m at start, "
+              f"lowest {rig.min_base_height:.3f} m" + (f"; video {args.render}" if args.render else ""))
+        return 1 if rig.fell else 0
+    return 0
+
+
+def _open_bus(port: str | None, baud: int, emulate_robot=None):
+    from motok_robot.errors import InputError
+    from motok_robot.servo.bus import DynamixelBus
+    from motok_robot.servo.convert import ServoMap
+    from motok_robot.servo.emulator import emulated_chain
+
+    if emulate_robot is not None:
+        chain = emulated_chain(ServoMap.from_specs(emulate_robot.servos), baud=baud)
+        return DynamixelBus(f"emulated:{emulate_robot.name}", baud, port_handler=chain)
+    if not port:
+        raise InputError("--port DEV is required")
+    return DynamixelBus(port, baud)
+
+
+def _scan(args: argparse.Namespace) -> int:
+    from motok_robot.servo import control_table as ct
+
+    robot = None
+    if args.emulate:
+        from motok_robot.robots import load
+
+        robot = load(args.emulate)
+    bus = _open_bus(args.port, args.baud, robot)
+    try:
+        found = bus.scan()
+        if not found:
+            print(f"no servo answered on {bus.port_name} at {args.baud} baud")
+            return 1
+        ids = sorted(found)
+        positions = bus.read_present_positions_each(ids)
+        errors = bus.read_hardware_errors(ids)
+    finally:
+        bus.close()
+    print(f"{len(ids)} servo(s) on {bus.port_name} at {args.baud} baud")
+    print(f"{'id':>4}  {'model':<12} {'number':>6}  {'position':>8}  hardware error")
+    for servo_id, position in zip(ids, positions):
+        number = found[servo_id]
+        bits = errors[servo_id]
+        print(f"{servo_id:>4}  {ct.MODEL_NAMES.get(number, '?'):<12} {number:>6}  {int(position):>8}  "
+              + (ct.describe_hardware_error(bits) if bits else "-"))
+    return 0
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    from motok_robot.robots import load
+    from motok_robot.servo.calibrate import calibrated_description, prepare, read_zero_pose
+    from motok_robot.servo.convert import ServoMap
+
+    robot = load(args.robot)
+    servo_map = ServoMap.from_specs(robot.servos)
+    baud = args.baud or (robot.bus.baud if robot.bus else 2_000_000)
+    bus = _open_bus(args.port, baud, robot if args.emulate else None)
+    try:
+        prepare(bus, servo_map)
+        if not args.yes:
+            print("Torque is OFF (support the robot). Move it by hand into its zero pose "
+                  "(every joint angle 0), then press Enter.")
+            input()
+        zero = read_zero_pose(bus, servo_map)
+    finally:
+        bus.close()
+    out = calibrated_description(robot, zero, args.out)
+    print(f"wrote {out}: zero offsets of {len(zero)} servos; check with: motok-robot robots show {out}")
+    return 0

@@ -1,0 +1,471 @@
+"""Stream a validated ``robot.npz`` to a servo bus at a fixed rate, failing safe.
+
+Sequence (:func:`play_file`):
+
+1. **Report gate** (:func:`check_validation_report`): a ``report.json`` with ``"passed": true``
+   (next to ``robot.npz`` or given explicitly) is required; ``force=True`` plays anyway and
+   warns (:class:`PlaybackWarning`).
+2. **Load** (:func:`load_trajectory`): the joint columns of ``qpos`` in servo-map order.
+3. **Pre-flight** (:meth:`Streamer.preflight`): ping every ID, check model numbers and
+   Hardware Error Status, set Return Delay Time, read present positions (each must lie in its
+   limits), set Profile Velocity to the servo's velocity limit, write Goal = present, enable
+   torque, arm the bus watchdog.
+4. **Stream** (:meth:`Streamer.play`): ramp (smoothstep) from the present pose to frame 0 over
+   ``ramp_s``, then the trajectory linearly interpolated from its frame rate (20 fps) to the
+   control rate (125 Hz).  Every command passes :func:`~motok_robot.servo.convert.limit_command`:
+   clamped to the position limits and to a per-tick step of ``velocity_limit / rate``; NaN/inf
+   targets are replaced by the last safe command (counted, warned).  Each tick: sync-write
+   goals, sync-read present positions, append a log row (flushed).
+5. **Stop**: on Ctrl-C, more than ``retry_budget`` consecutive failed ticks, or a hardware
+   error alert: stop streaming, hold the present position (or switch torque off when
+   ``on_stop="torque_off"``), close the log, and raise :class:`HardwareError` (Ctrl-C:
+   :class:`PlaybackInterrupted`) whose message names the servo, its joint and the cause.
+
+Timing uses ``perf_counter`` deadlines (:class:`~motok_robot.servo.timing.RealClock`): sleep
+most of the period, spin the last 0.5 ms.  A tick whose work overruns the next deadline is
+counted and the schedule restarts from the present time (no burst of catch-up writes, so
+consecutive writes are never closer than one period and the step limit stays a velocity limit).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from motok_robot.errors import HardwareError, InputError
+from motok_robot.servo import control_table as ct
+from motok_robot.servo.bus import ServoAlertError, ServoBus, ServoCommError, ServoError, ServoRejectedError
+from motok_robot.servo.config import ON_STOP_HOLD, PlaybackConfig
+from motok_robot.servo.convert import ServoMap, limit_command
+from motok_robot.servo.playback_log import PlaybackLog
+from motok_robot.servo.timing import LoopStats, RealClock, loop_stats
+
+
+class PlaybackWarning(UserWarning):
+    """Something playback went on despite (no passing report with force, clamped targets ...)."""
+
+
+class PlaybackInterrupted(HardwareError):
+    """Playback stopped by Ctrl-C (after the servos were put in their safe state)."""
+
+
+# ----------------------------------------------------------------------------- inputs
+@dataclass
+class Trajectory:
+    """Joint targets for the servos.
+
+    Attributes:
+        q: float64 [T, n_servos] joint angles (rad), servo-map order (may hold NaN).
+        fps: frames per second of ``q``.
+        joints: joint name of each column.
+        source: the file it came from.
+    """
+
+    q: np.ndarray
+    fps: float
+    joints: tuple[str, ...]
+    source: Path | None = None
+
+    @property
+    def duration_s(self) -> float:
+        return (len(self.q) - 1) / self.fps
+
+
+def load_trajectory(path: str | Path, servo_map: ServoMap, robot_name: str | None = None) -> Trajectory:
+    """Read ``robot.npz`` (CONTRACTS.md) and pick the servo joints' columns of ``qpos``.
+
+    ``qpos`` is [T, nq] with the free base (7 values) first; the joint columns are the last
+    ``len(joint_names)``.  Raises InputError naming the file and field.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such trajectory file")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            fields = {k: data[k] for k in data.files}
+    except Exception as exc:
+        raise InputError(f"{path}: not a readable .npz file ({exc})") from None
+    for key in ("qpos", "joint_names", "fps"):
+        if key not in fields:
+            raise InputError(f"{path}: field '{key}' missing (robot.npz needs qpos, joint_names, robot, fps)")
+    qpos = np.asarray(fields["qpos"], dtype=np.float64)
+    names = [str(n) for n in np.atleast_1d(fields["joint_names"])]
+    fps = float(fields["fps"])
+    if qpos.ndim != 2 or qpos.shape[0] < 1:
+        raise InputError(f"{path}: field 'qpos' must be [T, nq] with T >= 1, got shape {qpos.shape}")
+    if len(names) > qpos.shape[1]:
+        raise InputError(f"{path}: {len(names)} joint_names but qpos has only {qpos.shape[1]} columns")
+    if not (math.isfinite(fps) and fps > 0):
+        raise InputError(f"{path}: field 'fps' must be a positive number, got {fps}")
+    if robot_name is not None and "robot" in fields:
+        saved = str(fields["robot"])
+        if saved and saved != robot_name and Path(saved).stem != robot_name:
+            raise InputError(f"{path}: trajectory was made for robot '{saved}', not '{robot_name}'")
+    offset = qpos.shape[1] - len(names)
+    index = {n: i for i, n in enumerate(names)}
+    missing = [j for j in servo_map.joints if j not in index]
+    if missing:
+        raise InputError(f"{path}: joint_names lacks the servo joint(s) {', '.join(missing)}")
+    columns = [offset + index[j] for j in servo_map.joints]
+    return Trajectory(q=qpos[:, columns].copy(), fps=fps, joints=servo_map.joints, source=path)
+
+
+def check_validation_report(trajectory_path: str | Path, report_path: str | Path | None = None, *,
+                            force: bool = False, robot_name: str | None = None) -> dict | None:
+    """Require a passing validation report for ``trajectory_path``; returns the report (or None).
+
+    The report is ``report_path`` or ``report.json`` next to the trajectory.  It must parse,
+    have ``"passed": true``, and (when it records them) name the same robot and trajectory
+    file.  Otherwise InputError, unless ``force`` (then a :class:`PlaybackWarning`).
+    """
+    trajectory_path = Path(trajectory_path)
+    path = Path(report_path) if report_path is not None else trajectory_path.with_name("report.json")
+    report = None
+    problem = None
+    if not path.is_file():
+        problem = f"no validation report at {path}"
+    else:
+        try:
+            report = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            problem = f"validation report {path} is unreadable ({exc})"
+        else:
+            if not isinstance(report, dict) or "passed" not in report:
+                problem = f"validation report {path} has no top-level 'passed' field"
+            elif report["passed"] is not True:
+                failed = [name for name, check in (report.get("checks") or {}).items()
+                          if isinstance(check, dict) and check.get("passed") is False]
+                problem = f"validation report {path} did not pass" + (f" (failed: {', '.join(failed)})" if failed else "")
+            elif robot_name and report.get("robot") and str(report["robot"]) != robot_name:
+                problem = f"validation report {path} is for robot '{report['robot']}', not '{robot_name}'"
+            elif isinstance(report.get("input"), str) and Path(report["input"]).name != trajectory_path.name:
+                problem = f"validation report {path} validated {report['input']}, not {trajectory_path.name}"
+    if problem is None:
+        return report
+    if not force:
+        raise InputError(f"{trajectory_path}: refusing to play: {problem}. Validate it first "
+                         "(motok-robot validate) or pass --force to play an unvalidated trajectory")
+    warnings.warn(f"{trajectory_path}: playing WITHOUT a passing validation report ({problem}) because of --force",
+                  PlaybackWarning, stacklevel=2)
+    return report
+
+
+def plan_targets(trajectory: Trajectory, start_ticks: np.ndarray, servo_map: ServoMap, rate_hz: float,
+                 ramp_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Wanted servo positions for every control tick, before the safety limiter.
+
+    Returns ``(targets float64 [N, n] ticks, is_ramp bool [N])``: ``round(ramp_s * rate)``
+    ramp ticks (smoothstep from ``start_ticks`` [n] to frame 0), then one tick per ``1/rate`` s
+    of the trajectory, linearly interpolated between frames, up to and including the last frame.
+    """
+    q = trajectory.q
+    n_ramp = int(round(ramp_s * rate_hz))
+    n_play = int(math.floor(trajectory.duration_s * rate_hz + 1e-9)) + 1
+    with np.errstate(invalid="ignore", over="ignore"):
+        frames = np.arange(n_play) / rate_hz * trajectory.fps
+        i0 = np.minimum(np.floor(frames).astype(np.int64), max(len(q) - 2, 0))
+        w = np.clip(frames - i0, 0.0, 1.0)[:, None]
+        i1 = np.minimum(i0 + 1, len(q) - 1)
+        exact = w[:, 0] == 0.0
+        play_q = np.where(exact[:, None], q[i0], q[i0] * (1.0 - w) + q[i1] * w)
+        play = servo_map.ticks_float(play_q)
+        s = np.arange(1, n_ramp + 1) / max(n_ramp, 1)
+        s = (s * s * (3.0 - 2.0 * s))[:, None]
+        first = play[0]
+        start = np.asarray(start_ticks, dtype=np.float64)
+        ramp = start + (first - start) * s
+    targets = np.concatenate([ramp, play], axis=0)
+    is_ramp = np.zeros(len(targets), dtype=bool)
+    is_ramp[:n_ramp] = True
+    return targets, is_ramp
+
+
+# ----------------------------------------------------------------------------- results
+@dataclass
+class PlaybackResult:
+    """What a playback did. Counts of servo-ticks: ``non_finite`` targets replaced,
+    ``limited`` targets clamped (position or step limit); ``failed_ticks`` ticks whose bus I/O
+    failed and were retried."""
+
+    stats: LoopStats
+    ticks: int
+    ramp_ticks: int
+    trajectory_s: float
+    non_finite: int
+    limited: int
+    failed_ticks: int
+    log_path: str | None
+    completed: bool = True
+    stopped_because: str | None = None
+    extra: dict = field(default_factory=dict)
+
+    def line(self) -> str:
+        return (f"played {self.trajectory_s:.2f} s ({self.ticks} ticks incl. {self.ramp_ticks} ramp): "
+                f"{self.stats.line()}; clamped {self.limited}, non-finite {self.non_finite}, "
+                f"failed ticks {self.failed_ticks}" + (f"; log {self.log_path}" if self.log_path else ""))
+
+    def as_dict(self) -> dict:
+        out = asdict(self)
+        out["stats"] = self.stats.as_dict()
+        return out
+
+
+# ----------------------------------------------------------------------------- streamer
+class Streamer:
+    """Plays joint trajectories on a :class:`ServoBus` (see the module docstring).
+
+    Args:
+        bus: the servo bus (DynamixelBus, DynamixelBus over the emulator, SimRig).
+        servo_map: the robot's servos.
+        config: :class:`PlaybackConfig`.
+        clock: ``RealClock`` by default; a ``FakeClock`` in tests.
+        log_path: CSV log (see :mod:`motok_robot.servo.playback_log`); None = no log.
+        on_tick: ``on_tick(tick, streamer)`` called at the start of every control tick (tests
+            use it to inject faults or a KeyboardInterrupt).
+    """
+
+    def __init__(self, bus: ServoBus, servo_map: ServoMap, config: PlaybackConfig | None = None, *,
+                 clock=None, log_path: str | Path | None = None,
+                 on_tick: Callable[[int, "Streamer"], None] | None = None):
+        self.bus = bus
+        self.map = servo_map
+        self.config = config or PlaybackConfig()
+        self.clock = clock or RealClock(self.config.spin_s)
+        self.log_path = Path(log_path) if log_path is not None else None
+        self.on_tick = on_tick
+        self.ids = [int(i) for i in servo_map.ids]
+        self.present: np.ndarray | None = None
+        self._names = servo_map.names_by_id
+
+    def _label(self, servo_id: int) -> str:
+        joint = self._names.get(int(servo_id))
+        return f"servo {servo_id}" + (f" ({joint})" if joint else "")
+
+    def _describe(self, exc: ServoError) -> str:
+        return exc.describe(self._names)
+
+    # ------------------------------------------------------------------ pre-flight
+    def preflight(self) -> np.ndarray:
+        """Check and prepare the servos; returns present positions (int64 ticks [n])."""
+        bus, ids, cfg = self.bus, self.ids, self.config
+        silent, wrong = [], []
+        for k, servo_id in enumerate(ids):
+            number = None
+            for _attempt in range(cfg.retry_budget + 1):
+                try:
+                    number = bus.ping(servo_id)
+                    break
+                except ServoCommError as exc:
+                    cause = exc.cause
+                    bus.reset()
+            if number is None:
+                silent.append(f"{self._label(servo_id)}: {cause}")
+                continue
+            if cfg.check_models:
+                model = self.map.models[k]
+                expected = ct.MODEL_NUMBERS.get(model.upper())
+                if expected is None:
+                    raise InputError(f"{self._label(servo_id)}: unknown servo model '{model}' in the servo map "
+                                     f"(known: {', '.join(ct.MODEL_NUMBERS)})")
+                if number != expected:
+                    found = ct.MODEL_NAMES.get(number, "unknown model")
+                    wrong.append(f"{self._label(servo_id)}: model number {number} ({found}), "
+                                 f"servo map says {model} ({expected})")
+        if silent:
+            raise HardwareError(f"pre-flight on {bus.port_name}: {len(silent)} servo(s) do not answer ping: "
+                                + "; ".join(silent))
+        if wrong:
+            raise HardwareError(f"pre-flight on {bus.port_name}: " + "; ".join(wrong))
+        errors = bus.read_hardware_errors(ids)
+        bad = {i: b for i, b in errors.items() if b}
+        if bad:
+            raise HardwareError("pre-flight: " + "; ".join(
+                f"{self._label(i)}: hardware error: {ct.describe_hardware_error(b)} (Hardware Error Status 0x{b:02x}); "
+                "fix the cause and reboot the servo" for i, b in bad.items()))
+        if cfg.return_delay_units is not None:
+            for servo_id in ids:
+                try:
+                    bus.set_return_delay_time([servo_id], cfg.return_delay_units)
+                except ServoRejectedError:
+                    warnings.warn(f"{self._label(servo_id)}: Return Delay Time not changed (torque is on; it is an "
+                                  "EEPROM register). Set it to 0 with torque off for the fastest loop.",
+                                  PlaybackWarning, stacklevel=2)
+        bus.set_bus_watchdog(ids, 0)  # clears a watchdog that fired in an earlier session
+        present = bus.read_present_positions(ids)
+        outside = [f"{self._label(i)} at {p} outside [{lo}, {hi}]"
+                   for i, p, lo, hi in zip(ids, present, self.map.min_ticks, self.map.max_ticks) if not lo <= p <= hi]
+        if outside:
+            raise HardwareError("pre-flight: present position outside the servo's limits: " + "; ".join(outside)
+                                + ". Move the joint into range by hand (torque off) before playing")
+        if cfg.set_profile_velocity:
+            units = [ct.velocity_units_from_rad_s(v * cfg.velocity_margin) for v in self.map.velocity_limit]
+            bus.set_profile_velocity(ids, units)
+        bus.write_goal_positions(ids, present)  # no jump when torque comes on
+        bus.set_torque(ids, True)
+        watchdog_units = int(round(cfg.watchdog_ms / (1e3 * ct.SECONDS_PER_WATCHDOG_UNIT)))
+        if watchdog_units:
+            bus.set_bus_watchdog(ids, watchdog_units)
+        self.present = present
+        return present
+
+    # ------------------------------------------------------------------ streaming
+    def play(self, trajectory: Trajectory, present: np.ndarray | None = None) -> PlaybackResult:
+        """Ramp to frame 0 and stream ``trajectory``; runs :meth:`preflight` first if needed."""
+        if present is None:
+            present = self.present if self.present is not None else self.preflight()
+        cfg, bus, ids, smap, clock = self.config, self.bus, self.ids, self.map, self.clock
+        period = 1.0 / cfg.rate_hz
+        targets, is_ramp = plan_targets(trajectory, present, smap, cfg.rate_hz, cfg.ramp_s)
+        n_ticks = len(targets)
+        step = smap.step_limit_ticks(period, cfg.velocity_margin)
+        lo, hi = smap.min_ticks, smap.max_ticks
+
+        starts = np.zeros(n_ticks)
+        deadlines = np.zeros(n_ticks)
+        work = np.zeros(n_ticks)
+        previous = np.asarray(present, dtype=np.int64).copy()
+        last_present = previous.copy()
+        non_finite = limited = failed_ticks = overruns = 0
+        consecutive = 0
+        warned_non_finite = False
+        done = 0
+        log = PlaybackLog(self.log_path, smap.joints) if self.log_path is not None else None
+        stop_exc: BaseException | None = None
+        t0 = deadline = clock.now()
+        try:
+            for k in range(n_ticks):
+                clock.sleep_until(deadline)
+                start = clock.now()
+                starts[k], deadlines[k] = start, deadline
+                if self.on_tick is not None:
+                    self.on_tick(k, self)
+                command, nf, lim = limit_command(targets[k], previous, lo, hi, step)
+                if nf.any():
+                    non_finite += int(nf.sum())
+                    if not warned_non_finite:
+                        bad = [self._label(i) for i in np.asarray(ids)[nf]]
+                        warnings.warn(f"non-finite target at tick {k} for {', '.join(bad)}: holding the last safe "
+                                      "command (further occurrences are counted, not warned)", PlaybackWarning,
+                                      stacklevel=2)
+                        warned_non_finite = True
+                limited += int(lim.sum())
+                present_now = None
+                try:
+                    bus.write_goal_positions(ids, command)
+                    previous = command
+                    if k % cfg.read_every == 0:
+                        present_now = bus.read_present_positions(ids)
+                        last_present = present_now
+                    consecutive = 0
+                except ServoAlertError:
+                    previous = command
+                    raise
+                except ServoCommError as exc:
+                    previous = command
+                    failed_ticks += 1
+                    consecutive += 1
+                    bus.reset()
+                    if consecutive > cfg.retry_budget:
+                        raise ServoCommError(exc.servo_id, f"{exc.cause}; {consecutive} consecutive failed ticks "
+                                             f"(retry budget {cfg.retry_budget})", exc.port) from None
+                if log is not None:
+                    log.write(start - t0, k, "ramp" if is_ramp[k] else "play", command, present_now)
+                done = k + 1
+                end = clock.now()
+                work[k] = end - start
+                deadline += period
+                if end > deadline:
+                    overruns += 1
+                    deadline = end
+        except KeyboardInterrupt as exc:
+            stop_exc = exc
+        except ServoError as exc:
+            stop_exc = exc
+
+        n_done = max(done, 1) if stop_exc is not None else n_ticks
+        stats = loop_stats(starts[:n_done], deadlines[:n_done], work[:n_done], period, overruns)
+        ramp_ticks = int(is_ramp.sum())
+        result = PlaybackResult(
+            stats=stats, ticks=done, ramp_ticks=min(ramp_ticks, done),
+            trajectory_s=max(0, done - ramp_ticks - 1) * period, non_finite=non_finite, limited=limited,
+            failed_ticks=failed_ticks, log_path=str(self.log_path) if self.log_path else None)
+        if stop_exc is None:
+            try:
+                bus.set_bus_watchdog(ids, 0)  # keep holding the last pose without a watchdog
+            finally:
+                if log is not None:
+                    log.close()
+            self._write_stats(result)
+            if non_finite:
+                warnings.warn(f"{non_finite} non-finite servo targets were replaced by the last safe command",
+                              PlaybackWarning, stacklevel=2)
+            return result
+
+        action = self._safe_stop(previous, last_present, log, clock.now() - t0, done)
+        if log is not None:
+            log.close()
+        when = f"playback stopped at t={done * period:.2f} s (tick {done}/{n_ticks})"
+        where = f"; log: {self.log_path}" if self.log_path else ""
+        result.completed = False
+        if isinstance(stop_exc, KeyboardInterrupt):
+            result.stopped_because = "interrupted (Ctrl-C)"
+            self._write_stats(result)
+            raise PlaybackInterrupted(f"interrupted (Ctrl-C); {when}; {action}{where}") from None
+        result.stopped_because = self._describe(stop_exc)
+        self._write_stats(result)
+        raise HardwareError(f"{self._describe(stop_exc)}; {when}; {action}{where}") from None
+
+    def _safe_stop(self, last_command: np.ndarray, last_present: np.ndarray, log: PlaybackLog | None,
+                   time_s: float, tick: int) -> str:
+        """Put every servo that still answers into the configured safe state; say what happened."""
+        bus, ids, smap = self.bus, self.ids, self.map
+        bus.reset()
+        if self.config.on_stop == ON_STOP_HOLD:
+            try:
+                present = bus.read_present_positions(ids)
+            except ServoError:
+                present = None
+            source = present if present is not None else last_command
+            hold = np.clip(np.asarray(source, dtype=np.int64), smap.min_ticks, smap.max_ticks)
+            try:
+                bus.write_goal_positions(ids, hold)
+            except ServoError as exc:
+                return f"could not command the hold position ({self._describe(exc)})"
+            if log is not None:
+                log.write(time_s, tick, "hold", hold, present)
+            what = "present" if present is not None else "last commanded"
+            return f"servos that answer are holding their {what} position (torque on)"
+        failed = []
+        for servo_id in ids:
+            try:
+                bus.set_torque([servo_id], False)
+            except ServoError:
+                failed.append(self._label(servo_id))
+        if failed:
+            return "torque switched off except on " + ", ".join(failed) + " (no answer)"
+        return "torque switched off on every servo"
+
+    def _write_stats(self, result: PlaybackResult) -> None:
+        if self.log_path is None:
+            return
+        path = self.log_path.with_name(self.log_path.stem + ".stats.json")
+        path.write_text(json.dumps(result.as_dict(), indent=2) + "\n", encoding="utf-8")
+
+
+# ----------------------------------------------------------------------------- one call
+def play_file(trajectory_path: str | Path, robot, bus: ServoBus, *, config: PlaybackConfig | None = None,
+              report_path: str | Path | None = None, force: bool = False, log_path: str | Path | None = None,
+              clock=None, on_tick=None) -> PlaybackResult:
+    """Gate on the validation report, load ``robot.npz`` for ``robot``, pre-flight and play."""
+    check_validation_report(trajectory_path, report_path, force=force, robot_name=robot.name)
+    servo_map = ServoMap.from_specs(robot.servos)
+    trajectory = load_trajectory(trajectory_path, servo_map, robot.name)
+    streamer = Streamer(bus, servo_map, config, clock=clock, log_path=log_path, on_tick=on_tick)
+    streamer.preflight()
+    return streamer.play(trajectory)
