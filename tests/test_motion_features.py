@@ -315,3 +315,14 @@ def test_roundtrip_checker_on_a_tiny_prepared_folder(tmp_path, capsys):
     np.save(tmp_path / "features" / "c0.npy", bad)
     assert roundtrip.main([str(tmp_path)]) == 1
     assert roundtrip.main([str(tmp_path / "nothing")]) == 2
+
+
+def test_numpy_modules_do_not_import_torch():
+    import subprocess
+    import sys
+
+    code = ("import sys, motok_robot.motion, motok_robot.motion.features, motok_robot.motion.metrics, "
+            "motok_robot.motion.render, motok_robot.motion.roundtrip, motok_robot.motion.synthetic, "
+            "motok_robot.motion.rotations; print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
