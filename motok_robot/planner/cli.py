@@ -124,7 +124,7 @@ def _slug(text: str) -> str:
 def _generate(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from motok_robot.planner.generate import load_generator
+    from motok_robot.planner.generate import check_text, load_generator
 
     if args.prompts is not None and (args.text is not None or args.action or args.unconditional):
         raise InputError("--prompts cannot be combined with a TEXT argument, --action or --unconditional")
@@ -134,6 +134,8 @@ def _generate(args: argparse.Namespace) -> int:
         raise InputError(f"--seed must be >= 0 (got {args.seed})")
     if args.seconds is not None and args.seconds <= 0:
         raise InputError(f"--seconds must be positive (got {args.seconds:g})")
+    if args.text is not None:
+        check_text(args.text)
     trajectory = _read_trajectory(args.trajectory) if args.trajectory is not None else None
     gen = load_generator(args.planner, args.tokenizer, args.planner_run, args.device)
     options = dict(seconds=args.seconds, seed=args.seed, cfg_scale=args.cfg, steps=args.steps,

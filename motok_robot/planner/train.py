@@ -191,11 +191,11 @@ def train_planner(
         torch.nn.utils.clip_grad_norm_(model.parameters(), train_cfg.grad_clip)
         optimiser.step()
         step += 1
-        running_loss += float(out_loss["loss"])
-        running_acc += float(out_loss["accuracy"])
+        running_loss += float(out_loss["loss"].detach())
+        running_acc += float(out_loss["accuracy"].detach())
         running_n += 1
         bar.update(1)
-        bar.set_postfix(loss=f"{float(out_loss['loss']):.3f}", acc=f"{float(out_loss['accuracy']):.3f}")
+        bar.set_postfix(loss=f"{float(out_loss['loss'].detach()):.3f}", acc=f"{float(out_loss['accuracy'].detach()):.3f}")
         if step % train_cfg.val_every == 0 or step == train_cfg.steps:
             metrics = evaluate(model, val_data, train_cfg, dev)
             row = {"step": step, "lr": lr, "train_loss": running_loss / running_n,

