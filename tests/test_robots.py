@@ -239,6 +239,27 @@ def test_self_collisions_are_detectable(robot):
     assert any(a.startswith("l_") and b.startswith("r_") for a, b in legs), legs
 
 
+def test_head_clears_the_torso_over_its_whole_range(robot):
+    """The neck joint ranges are what the links allow: no head/torso contact anywhere in them."""
+    m = robot.model
+    d = mujoco.MjData(m)
+    pan, tilt = ("head_pan", "head_tilt") if "head_pan" in robot.joint_names else ("neck_yaw", "neck_pitch")
+    head = [g for g in range(m.ngeom) if m.body(m.geom_bodyid[g]).name == "head" and m.geom_contype[g]]
+    trunk = [g for g in range(m.ngeom) if m.geom_bodyid[g] == m.body(robot.torso_body).id and m.geom_contype[g]]
+    closest = np.inf
+    for a in np.linspace(*robot.joint_range[robot.joint_index(pan)], 5):
+        for b in np.linspace(*robot.joint_range[robot.joint_index(tilt)], 9):
+            q = robot.nominal_qpos()
+            q[robot.qpos_adr[robot.joint_index(pan)]] = a
+            q[robot.qpos_adr[robot.joint_index(tilt)]] = b
+            d.qpos[:] = q
+            mujoco.mj_kinematics(m, d)
+            for g1 in head:
+                for g2 in trunk:
+                    closest = min(closest, mujoco.mj_geomDistance(m, d, g1, g2, 0.05, None))
+    assert 0.0 < closest < 0.05  # clear, but not by a wide margin (the range is not too timid)
+
+
 def test_stands_for_10_seconds_under_its_own_actuators(robot):
     m = robot.model
     d = mujoco.MjData(m)
@@ -296,7 +317,7 @@ def test_the_copy_itself_loads(tmp_path):
         (_sub("head_tilt = { id = 20, sign = 1,", "head_tilt = { id = 20, sign = 2,"), r"\[servos\.head_tilt\] sign must be 1 or -1"),
         (_sub("head_pan = { id = 19, sign = 1, zero_offset_ticks = 2048,", "head_pan = { id = 19, sign = 1,"), r"\[servos\.head_pan\] missing field 'zero_offset_ticks'"),
         (_sub("l_knee = { id = 14,", "l_kneee = { id = 14,"), r"\[servos\.l_kneee\] unknown joint 'l_kneee'"),
-        (_sub("head_tilt = { id = 20, sign = 1, zero_offset_ticks = 2048, min_ticks = 1591, max_ticks = 2309 }\n", ""), r"\[servos\] no servo for actuated joint\(s\) head_tilt"),
+        (_sub("head_tilt = { id = 20, sign = 1, zero_offset_ticks = 2048, min_ticks = 1591, max_ticks = 2440 }\n", ""), r"\[servos\] no servo for actuated joint\(s\) head_tilt"),
         (_sub("l_knee = 0.6", "l_knee = 2.9"), r"\[nominal_pose\.l_knee\] 2\.9 rad outside the joint range"),
         (_sub("left_knee = {", "left_kneee = {"), r"\[keypoints\.left_kneee\] 'left_kneee' is not a canonical human joint"),
         (_sub("torso_body = \"torso\"\n", ""), r"missing field 'torso_body'"),
