@@ -13,7 +13,7 @@ import pytest
 
 from motok_robot.errors import InputError
 from motok_robot.motion import skeleton as sk
-from motok_robot.robots import MODELS_ENV, list_robots, load, models_dir
+from motok_robot.robots import DEFAULT_ROBOT, MODELS_ENV, list_robots, load, models_dir
 
 ROBOTS = ("op3_like", "humanoid25")
 OP3_TOML = models_dir() / "op3_like.toml"
@@ -35,6 +35,7 @@ def names(model, obj, count):
 
 def test_both_robots_are_listed():
     assert set(ROBOTS) <= set(list_robots())
+    assert DEFAULT_ROBOT == "op3_like" and load(DEFAULT_ROBOT).servos
 
 
 def test_compiles_and_steps_without_warnings(robot):

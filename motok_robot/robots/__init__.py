@@ -13,10 +13,11 @@ from motok_robot.robots.description import (
     check_against_model,
     parse_description,
 )
-from motok_robot.robots.robot import MODELS_ENV, Robot, list_robots, load, models_dir
+from motok_robot.robots.robot import DEFAULT_ROBOT, MODELS_ENV, Robot, list_robots, load, models_dir
 
 __all__ = [
     "BusSpec",
+    "DEFAULT_ROBOT",
     "Keypoint",
     "MODELS_ENV",
     "Robot",

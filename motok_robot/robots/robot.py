@@ -28,6 +28,8 @@ from motok_robot.robots.description import (
 
 #: environment variable naming a folder of robot files that replaces ``<repo>/models/mjcf``
 MODELS_ENV = "MOTOK_ROBOT_MODELS"
+#: the robot used when a command is not told which one (the Dynamixel-driven OP3-class humanoid)
+DEFAULT_ROBOT = "op3_like"
 
 
 def models_dir() -> Path:
