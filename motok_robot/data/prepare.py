@@ -383,7 +383,7 @@ def format_summary(summary: dict) -> str:
         h = s["body_height_m_median"]
         lines.append(
             f"{k:<11} {s['clips']:>7} {s['mirrored_clips']:>8} {s['hours']:>8.3f} {s['skipped_files']:>8} "
-            f"{s['duplicate_files']:>6} {('%.2f' % h) if h else '-':>9}"
+            f"{s['duplicate_clips']:>6} {('%.2f' % h) if h else '-':>9}"
         )
     lines.append(
         f"{'total':<11} {summary['total_clips']:>7} {summary['total_clips_with_mirrors'] - summary['total_clips']:>8} "
