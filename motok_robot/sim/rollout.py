@@ -63,6 +63,7 @@ class RolloutResult:
     cop_margin: np.ndarray           # [S] m, signed distance to the simulated sole polygon
     cop_support: list                # S hulls [H, 2]
     valid_frames: np.ndarray         # bool [T] frames before the fall
+    step_qpos: np.ndarray            # [nstep + 1, nq] qpos at every physics step (row 0: start)
     wall_s: float = 0.0
 
 
@@ -193,4 +194,4 @@ def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: Validation
         fps=fps, timestep=dt, qpos=sim_qpos, fell=fell, fall_time_s=fall_time, fall_reason=fall_reason,
         root_height=sim_qpos[:, 2], root_tilt=frame_tilt, tracking_error=err, tracking_rmse_per_joint=rmse_joint,
         tracking_rmse=rmse, base_drift=drift, cop_time=cop_time, cop=cop, cop_margin=cop_margin,
-        cop_support=hulls, valid_frames=valid, wall_s=_time.perf_counter() - start)
+        cop_support=hulls, valid_frames=valid, step_qpos=np.vstack([qpos[:1], all_qpos]), wall_s=_time.perf_counter() - start)
