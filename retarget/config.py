@@ -1,0 +1,88 @@
+"""Retargeting settings: every default lives here (dataclasses, no heavy imports)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class ContactConfig:
+    """Foot-contact detection on the *human* motion (metres, seconds, before scaling).
+
+    A foot is a candidate for contact in a frame when
+
+    * its lowest point is near the floor: the toe joint (``left_foot`` / ``right_foot``) is at
+      most ``toe_height`` above the floor, or the ankle at most ``ankle_height`` above it (the
+      floor is the ``floor_percentile``-th percentile of the lowest foot joint over the clip),
+    * and it is nearly still horizontally: the slower of ankle and toe moves slower than
+      ``enter_speed`` (to enter a contact phase) / ``exit_speed`` (to stay in one; hysteresis).
+
+    Phases shorter than ``min_contact_frames`` are dropped, swing gaps shorter than
+    ``min_swing_frames`` between two contacts are filled.  Defaults suit walking mocap of an
+    adult at 20 fps: a planted foot of a walking person moves < 0.1 m/s at the heel or toe,
+    a swinging foot 1-4 m/s.
+    """
+
+    toe_height: float = 0.06
+    ankle_height: float = 0.12
+    enter_speed: float = 0.30
+    exit_speed: float = 0.50
+    min_contact_frames: int = 3
+    min_swing_frames: int = 2
+    floor_percentile: float = 2.0
+    floor_height: float | None = None  # metres; None = estimate (floor_percentile) from the clip
+
+
+@dataclass(frozen=True)
+class CostWeights:
+    """Objective weights (dimensionless; positions are divided by the robot leg length first,
+    angles are in radians, per frame and summed over the window).
+    """
+
+    keypoint: float = 100.0  # x keypoint weight from the robot description, per (error / leg length)^2
+    heading: float = 1.0  # (base yaw - human heading)^2
+    foot_yaw: float = 1.0  # |sole forward axis (xy) - human foot direction (xy)|^2, per foot
+    velocity: float = 0.05  # |q[t+1] - q[t]|^2 (base position in leg lengths, angles in rad)
+    acceleration: float = 0.5  # |q[t+1] - 2 q[t] + q[t-1]|^2
+    nominal: float = 0.01  # |joints - nominal joints|^2
+    base_tilt: float = 0.1  # (pitch^2 + roll^2) of the base: keeps the torso upright when unobserved
+    com: float = 0.0  # soft: horizontal CoM distance to the support centre (leg lengths)^2, in contact frames
+
+
+@dataclass(frozen=True)
+class SolverConfig:
+    """IPOPT settings (see https://coin-or.github.io/Ipopt/OPTIONS.html)."""
+
+    tol: float = 1e-4  # IPOPT's scaled optimality error; the objective is ~1e3 per window
+    acceptable_tol: float = 1e-4
+    constr_viol_tol: float = 1e-6  # metres / radians: contact equalities hold to a micrometre
+    max_iter: int = 200
+    hessian: str = "gauss-newton"  # or "exact", "limited-memory"
+    linear_solver: str = "mumps"
+    mu_strategy: str = "adaptive"
+    mu_init: float = 1e-2  # the primal start is close (previous window / previous frame)
+    max_pitch: float = 1.3  # rad; Euler base parametrisation is singular at pi/2 (see problem.py)
+    extra: tuple = ()  # further (name, value) IPOPT options, e.g. (("print_level", 5),)
+
+
+@dataclass(frozen=True)
+class RetargetConfig:
+    """One retargeting run.
+
+    ``window`` frames are optimised together; consecutive windows share ``overlap`` frames:
+    the last ``overlap`` frames of a window are look-ahead only (they warm-start the next
+    window, which re-solves them with more future context). ``mode="per-frame"`` solves one
+    frame at a time with the same costs (the IK baseline). ``scale=False`` uses the human
+    joints as robot targets unchanged (for motions that are already robot-sized).
+    """
+
+    window: int = 60
+    overlap: int = 10
+    mode: str = "trajectory"  # or "per-frame"
+    scale: bool = True
+    allow_partial: bool = False
+    weights: CostWeights = field(default_factory=CostWeights)
+    contacts: ContactConfig = field(default_factory=ContactConfig)
+    solver: SolverConfig = field(default_factory=SolverConfig)
+    ground_height: float = 0.0  # metres, world z of the floor
+    velocity_margin: float = 0.98  # use this fraction of each joint's velocity limit
