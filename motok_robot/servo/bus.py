@@ -108,8 +108,11 @@ class ServoBus(abc.ABC):
         """Every servo that answers: ``{id: model number}``."""
 
     @abc.abstractmethod
-    def read_present_positions(self, ids: Sequence[int]) -> np.ndarray:
-        """Present Position (132) of ``ids`` in one sync read: int64 [len(ids)] ticks."""
+    def read_present_positions(self, ids: Sequence[int], *, allow_alert: bool = False) -> np.ndarray:
+        """Present Position (132) of ``ids`` in one sync read: int64 [len(ids)] ticks.
+
+        A servo reporting a hardware error raises :class:`ServoAlertError` unless ``allow_alert``.
+        """
 
     def read_present_positions_each(self, ids: Sequence[int]) -> np.ndarray:
         """Present Position of ``ids`` read servo by servo (slower; works with any Return Delay Time)."""
@@ -350,7 +353,7 @@ class DynamixelBus(ServoBus):
         if result != self._success:
             raise self._comm_error(None, result, "sync write of goal positions")
 
-    def read_present_positions(self, ids):
+    def read_present_positions(self, ids, *, allow_alert=False):
         ids = tuple(int(i) for i in ids)
         reader = self._readers.get(ids)
         if reader is None:
@@ -360,10 +363,13 @@ class DynamixelBus(ServoBus):
                 reader.addParam(servo_id)
             self._readers[ids] = reader
         if not self._fast_checked:
-            # probe once: older firmware does not know Fast Sync Read
+            # probe once: firmware before v45 does not know Fast Sync Read.  Fall back only when
+            # fast fails twice while plain Sync Read works in between (not on a one-off glitch).
             if reader.fastSyncRead() != self._success:
-                if reader.txRxPacket() == self._success:
+                self.reset()
+                if reader.txRxPacket() == self._success and reader.fastSyncRead() != self._success:
                     self._fast_sync_read = False
+                self.reset()
             self._fast_checked = True
         result = reader.fastSyncRead() if self._fast_sync_read else reader.txRxPacket()
         if result != self._success:
@@ -379,7 +385,7 @@ class DynamixelBus(ServoBus):
             raise self._comm_error(None, result, what + " (every servo answers ping)")
         for servo_id in ids:
             error = reader.errors.get(servo_id, 0)
-            if error & ct.STATUS_ALERT_BIT:
+            if error & ct.STATUS_ALERT_BIT and not allow_alert:
                 raise ServoAlertError(servo_id, self._try_read_hardware_error(servo_id), self.port_name)
         return np.array([int.from_bytes(bytes(reader.data_dict[i][:4]), "little", signed=True) for i in ids],
                         dtype=np.int64)

@@ -131,7 +131,7 @@ class SimRig(ServoBus):
     def scan(self) -> dict[int, int]:
         return {int(i): self.ping(int(i)) for i in self.map.ids}
 
-    def read_present_positions(self, ids):
+    def read_present_positions(self, ids, *, allow_alert=False):
         self._check_ids(ids)
         self.advance()
         cols = [self._column[int(i)] for i in ids]

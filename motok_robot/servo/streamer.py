@@ -252,7 +252,18 @@ class Streamer:
 
     # ------------------------------------------------------------------ pre-flight
     def preflight(self) -> np.ndarray:
-        """Check and prepare the servos; returns present positions (int64 ticks [n])."""
+        """Check and prepare the servos; returns present positions (int64 ticks [n]).
+
+        Raises HardwareError naming every servo at fault; torque is only switched on at the end.
+        """
+        try:
+            return self._preflight()
+        except ServoAlertError as exc:
+            raise HardwareError(f"pre-flight: {self._describe(exc)}; fix the cause and reboot the servo") from None
+        except ServoError as exc:
+            raise HardwareError(f"pre-flight: {self._describe(exc)}") from None
+
+    def _preflight(self) -> np.ndarray:
         bus, ids, cfg = self.bus, self.ids, self.config
         silent, wrong = [], []
         for k, servo_id in enumerate(ids):
@@ -333,6 +344,7 @@ class Streamer:
         last_present = previous.copy()
         non_finite = limited = failed_ticks = overruns = 0
         consecutive = 0
+        first_failure: ServoCommError | None = None
         warned_non_finite = False
         done = 0
         log = PlaybackLog(self.log_path, smap.joints) if self.log_path is not None else None
@@ -356,26 +368,33 @@ class Streamer:
                         warned_non_finite = True
                 limited += int(lim.sum())
                 present_now = None
+                fatal: ServoError | None = None
                 try:
                     bus.write_goal_positions(ids, command)
-                    previous = command
                     if k % cfg.read_every == 0:
                         present_now = bus.read_present_positions(ids)
                         last_present = present_now
                     consecutive = 0
-                except ServoAlertError:
-                    previous = command
-                    raise
+                except ServoAlertError as exc:
+                    fatal = exc
                 except ServoCommError as exc:
-                    previous = command
                     failed_ticks += 1
                     consecutive += 1
+                    # the first failure that names a servo is the best diagnosis: later ones can be
+                    # confused by late replies still arriving from the servo at fault
+                    if consecutive == 1 or (first_failure.servo_id is None and exc.servo_id is not None):
+                        first_failure = exc
                     bus.reset()
                     if consecutive > cfg.retry_budget:
-                        raise ServoCommError(exc.servo_id, f"{exc.cause}; {consecutive} consecutive failed ticks "
-                                             f"(retry budget {cfg.retry_budget})", exc.port) from None
+                        culprit = first_failure
+                        fatal = ServoCommError(culprit.servo_id, f"{culprit.cause}; {consecutive} consecutive failed "
+                                               f"ticks (retry budget {cfg.retry_budget})", culprit.port)
+                previous = command  # sent (a sync write has no reply to prove it arrived)
                 if log is not None:
                     log.write(start - t0, k, "ramp" if is_ramp[k] else "play", command, present_now)
+                if fatal is not None:
+                    done = k + 1
+                    raise fatal
                 done = k + 1
                 end = clock.now()
                 work[k] = end - start
@@ -428,7 +447,7 @@ class Streamer:
         bus.reset()
         if self.config.on_stop == ON_STOP_HOLD:
             try:
-                present = bus.read_present_positions(ids)
+                present = bus.read_present_positions(ids, allow_alert=True)
             except ServoError:
                 present = None
             source = present if present is not None else last_command
@@ -445,10 +464,12 @@ class Streamer:
         for servo_id in ids:
             try:
                 bus.set_torque([servo_id], False)
-            except ServoError:
-                failed.append(self._label(servo_id))
+            except ServoAlertError:
+                pass  # the write went through; the alert bit only repeats the hardware error
+            except ServoError as exc:
+                failed.append(f"{self._label(servo_id)} ({exc.cause})")
         if failed:
-            return "torque switched off except on " + ", ".join(failed) + " (no answer)"
+            return "torque switched off except on " + ", ".join(failed)
         return "torque switched off on every servo"
 
     def _write_stats(self, result: PlaybackResult) -> None:
