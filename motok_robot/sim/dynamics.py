@@ -43,19 +43,34 @@ GRAVITY = 9.81
 
 
 def finite_difference_qvel(model: mujoco.MjModel, qpos: np.ndarray, fps: float) -> np.ndarray:
-    """Generalised velocities [T, nv] of ``qpos`` [T, nq] by central differences (one-sided at ends).
+    """Generalised velocities [T, nv] of ``qpos`` [T, nq] (see :func:`qvel_qacc`)."""
+    return qvel_qacc(model, qpos, fps)[0]
 
-    Uses ``mj_differentiatePos`` so the free joint's angular velocity is right (body frame).
+
+def qvel_qacc(model: mujoco.MjModel, qpos: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
+    """Generalised velocities and accelerations [T, nv] of ``qpos`` [T, nq] sampled at ``fps``.
+
+    Half-step velocities h_t = (q_{t+1} - q_t) / dt come from ``mj_differentiatePos`` (so the
+    free joint's angular velocity is right, in the body frame); then the central estimates
+    qvel_t = (h_{t-1} + h_t) / 2 and qacc_t = (h_t - h_{t-1}) / dt (the three-point second
+    difference, which keeps a one-frame glitch at full height).  The first and last frames
+    take their neighbour's acceleration and a one-sided velocity.
     """
     T = qpos.shape[0]
     dt = 1.0 / fps
     qvel = np.zeros((T, model.nv))
-    for t in range(T):
-        a, b = max(t - 1, 0), min(t + 1, T - 1)
-        if a == b:
-            continue
-        mujoco.mj_differentiatePos(model, qvel[t], (b - a) * dt, qpos[a], qpos[b])
-    return qvel
+    qacc = np.zeros((T, model.nv))
+    if T < 2:
+        return qvel, qacc
+    half = np.zeros((T - 1, model.nv))
+    for t in range(T - 1):
+        mujoco.mj_differentiatePos(model, half[t], dt, qpos[t], qpos[t + 1])
+    qvel[0], qvel[-1] = half[0], half[-1]
+    if T > 2:
+        qvel[1:-1] = 0.5 * (half[:-1] + half[1:])
+        qacc[1:-1] = (half[1:] - half[:-1]) / dt
+        qacc[0], qacc[-1] = qacc[1], qacc[-2]
+    return qvel, qacc
 
 
 def finite_difference(values: np.ndarray, fps: float) -> np.ndarray:

@@ -25,8 +25,8 @@ import mujoco
 import numpy as np
 
 from motok_robot.sim.config import ValidationConfig
-from motok_robot.sim.dynamics import (ContactDistributor, finite_difference, finite_difference_qvel,
-                                      moving_average, zmp_from_centroidal)
+from motok_robot.sim.dynamics import (ContactDistributor, finite_difference, moving_average, qvel_qacc,
+                                      zmp_from_centroidal)
 from motok_robot.sim.geometry import convex_hull, signed_distance
 from motok_robot.sim.model_index import RobotIndex, body_pairs_in_collision
 
@@ -70,8 +70,7 @@ def replay(index: RobotIndex, qpos: np.ndarray, fps: float, config: ValidationCo
     d = mujoco.MjData(m)
     dc = mujoco.MjData(index.collision_model)
     T = qpos.shape[0]
-    qvel = finite_difference_qvel(m, qpos, fps)
-    qacc = finite_difference(qvel, fps)
+    qvel, qacc = qvel_qacc(m, qpos, fps)
     distributor = ContactDistributor(m, index.base_dof, config.friction_coefficient)
 
     corners = np.zeros((T, 2, 4, 3))

@@ -104,6 +104,11 @@ def index_robot(robot) -> RobotIndex:
         capable = robot_geom
     collision_model.geom_contype[:] = np.where(capable, 1, 0)
     collision_model.geom_conaffinity[:] = np.where(capable, 1, 0)
+    # the broad phase also filters on per-body flags compiled from the geoms: refresh them
+    for b in range(collision_model.nbody):
+        flag = int(capable[collision_model.geom_bodyid == b].any())
+        collision_model.body_contype[b] = flag
+        collision_model.body_conaffinity[b] = flag
     collision_model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
     collision_model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
 
