@@ -306,6 +306,11 @@ def test_validation_report_gate(tmp_path):
     report.write_text(json.dumps({"passed": True, "robot": "op3_like", "input": "/x/walk.npz"}))
     with pytest.raises(InputError, match="validated /x/walk.npz"):
         check_validation_report(npz, robot_name="op3_like")
+    report.write_text(json.dumps({"passed": True, "robot": "op3_like", "input": {"path": "/y/run.npz"}}))
+    with pytest.raises(InputError, match="validated /y/run.npz"):
+        check_validation_report(npz, robot_name="op3_like")
+    report.write_text(json.dumps({"passed": True, "robot": "op3_like", "input": {"path": str(npz), "frames": 3}}))
+    assert check_validation_report(npz, robot_name="op3_like")["passed"] is True
     report.write_text(json.dumps({"passed": True, "robot": "op3_like", "input": str(npz)}))
     assert check_validation_report(npz, robot_name="op3_like")["passed"] is True
     other = tmp_path / "elsewhere.json"

@@ -51,14 +51,8 @@ def register(commands, groups) -> None:
     calibrate.set_defaults(func=_calibrate)
 
 
-def _warnings_as_lines():
-    import warnings
-
-    def show(message, category, filename, lineno, file=None, line=None):
-        print(f"motok-robot: warning: {message}", file=sys.stderr)
-
-    warnings.showwarning = show
-    warnings.simplefilter("always")
+def _show_warning_line(message, category, filename, lineno, file=None, line=None):
+    print(f"motok-robot: warning: {message}", file=sys.stderr)
 
 
 def _robot_name_from_npz(path: Path) -> str | None:
@@ -72,6 +66,15 @@ def _robot_name_from_npz(path: Path) -> str | None:
 
 
 def _play(args: argparse.Namespace) -> int:
+    import warnings
+
+    with warnings.catch_warnings():  # warnings as one line each, restored afterwards
+        warnings.simplefilter("always")
+        warnings.showwarning = _show_warning_line
+        return _play_inner(args)
+
+
+def _play_inner(args: argparse.Namespace) -> int:
     import os
 
     if args.render:
@@ -84,7 +87,6 @@ def _play(args: argparse.Namespace) -> int:
     from motok_robot.servo.emulator import emulated_chain
     from motok_robot.servo.streamer import PlaybackInterrupted, Streamer, check_validation_report, load_trajectory
 
-    _warnings_as_lines()
     path = Path(args.trajectory)
     if not path.is_file():
         raise InputError(f"{path}: no such trajectory file")

@@ -136,6 +136,10 @@ def check_validation_report(trajectory_path: str | Path, report_path: str | Path
         except (OSError, ValueError) as exc:
             problem = f"validation report {path} is unreadable ({exc})"
         else:
+            validated = report.get("input") if isinstance(report, dict) else None
+            if isinstance(validated, dict):  # {"path": ..., "frames": ...}
+                validated = validated.get("path")
+            validated = validated if isinstance(validated, str) and validated else None
             if not isinstance(report, dict) or "passed" not in report:
                 problem = f"validation report {path} has no top-level 'passed' field"
             elif report["passed"] is not True:
@@ -144,8 +148,8 @@ def check_validation_report(trajectory_path: str | Path, report_path: str | Path
                 problem = f"validation report {path} did not pass" + (f" (failed: {', '.join(failed)})" if failed else "")
             elif robot_name and report.get("robot") and str(report["robot"]) != robot_name:
                 problem = f"validation report {path} is for robot '{report['robot']}', not '{robot_name}'"
-            elif isinstance(report.get("input"), str) and Path(report["input"]).name != trajectory_path.name:
-                problem = f"validation report {path} validated {report['input']}, not {trajectory_path.name}"
+            elif validated is not None and Path(validated).name != trajectory_path.name:
+                problem = f"validation report {path} validated {validated}, not {trajectory_path.name}"
     if problem is None:
         return report
     if not force:

@@ -1,0 +1,140 @@
+"""`motok-robot play` / `servo scan` / `servo calibrate` on emulated hardware, and their errors."""
+
+import json
+
+import numpy as np
+import pytest
+
+from motok_robot.cli import main
+from motok_robot.robots import load
+from motok_robot.servo.calibrate import calibrated_description, prepare, read_zero_pose
+from motok_robot.servo.convert import ServoMap
+from motok_robot.servo.playback_log import read_log
+from motok_robot.servo.testing import emulated_bus
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load("op3_like")
+
+
+def write_clip(folder, robot, seconds=0.4, passed=True, report=True):
+    """A short head-and-arm motion of op3_like at 20 fps, with a validation report."""
+    nominal = robot.nominal_qpos()
+    t = np.arange(int(seconds * 20) + 1) / 20
+    qpos = np.repeat(nominal[None], len(t), axis=0)
+    for joint, amp in (("head_pan", 0.3), ("l_sho_roll", 0.2)):
+        qpos[:, robot.qpos_adr[robot.joint_names.index(joint)]] += amp * np.sin(2 * np.pi * t)
+    path = folder / "robot.npz"
+    np.savez(path, qpos=qpos, joint_names=np.array(robot.joint_names), robot=robot.name, fps=20.0)
+    if report:
+        (folder / "report.json").write_text(json.dumps({"passed": passed, "robot": robot.name,
+                                                        "input": {"path": str(path)}}))
+    return path
+
+
+def one_line_error(capsys):
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("motok-robot: error: ") and "\n" not in err and "Traceback" not in err
+    return err
+
+
+def test_play_dry_run_streams_and_writes_log_and_stats(tmp_path, robot, capsys):
+    clip = write_clip(tmp_path, robot)
+    log = tmp_path / "out" / "play.csv"
+    rc = main(["play", str(clip), "--robot", "op3_like", "--dry-run", "--ramp", "0.2", "--log", str(log)])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert "played 0.40 s" in out and "jitter p50" in out and "overruns" in out
+    rows = read_log(log)
+    assert len(rows["tick"]) == 25 + 51
+    assert np.all(rows["cmd_head_pan"] <= 3072) and np.all(rows["cmd_head_pan"] >= 1024)
+    assert json.loads((tmp_path / "out" / "play.stats.json").read_text())["completed"] is True
+
+
+def test_play_refuses_unvalidated_and_failed_trajectories(tmp_path, robot, capsys):
+    clip = write_clip(tmp_path, robot, report=False)
+    assert main(["play", str(clip), "--dry-run"]) == 2
+    assert "refusing to play: no validation report" in one_line_error(capsys)
+    (tmp_path / "report.json").write_text(json.dumps({"passed": False}))
+    assert main(["play", str(clip), "--dry-run"]) == 2
+    assert "did not pass" in one_line_error(capsys)
+
+
+def test_play_force_warns_and_plays(tmp_path, robot, capsys):
+    clip = write_clip(tmp_path, robot, seconds=0.1, report=False)
+    rc = main(["play", str(clip), "--dry-run", "--force", "--ramp", "0.1"])
+    captured = capsys.readouterr()
+    assert rc == 0
+    assert "motok-robot: warning:" in captured.err and "WITHOUT a passing validation report" in captured.err
+    assert (tmp_path / "robot.playback.csv").is_file()
+
+
+def test_missing_port_is_a_one_line_error(tmp_path, robot, capsys):
+    clip = write_clip(tmp_path, robot)
+    rc = main(["play", str(clip), "--robot", "op3_like", "--port", str(tmp_path / "ttyUSB9")])
+    assert rc == 2
+    assert "does not exist" in one_line_error(capsys)
+    assert main(["play", str(clip)]) == 2
+    assert "--port DEV is required" in one_line_error(capsys)
+    assert main(["servo", "scan", "--port", "/dev/does-not-exist-42"]) == 2
+    assert "does not exist" in one_line_error(capsys)
+
+
+def test_busy_port_is_a_one_line_error(tmp_path, robot, capsys):
+    serial = pytest.importorskip("serial")
+    import os
+
+    if not hasattr(os, "openpty"):
+        pytest.skip("no pseudo-terminals")
+    clip = write_clip(tmp_path, robot)
+    master, slave = os.openpty()
+    holder = serial.Serial(os.ttyname(slave), 2_000_000, timeout=0, exclusive=True)
+    try:
+        assert main(["play", str(clip), "--port", os.ttyname(slave)]) == 2
+        assert "is busy" in one_line_error(capsys)
+    finally:
+        holder.close()
+        os.close(master)
+        os.close(slave)
+
+
+def test_scan_lists_ids_models_and_positions(capsys):
+    assert main(["servo", "scan", "--emulate", "op3_like"]) == 0
+    out = capsys.readouterr().out
+    assert "20 servo(s)" in out
+    lines = [line.split() for line in out.splitlines()[2:]]
+    assert [int(f[0]) for f in lines] == list(range(1, 21))
+    assert all(f[1] == "XM430-W350" and f[2] == "1020" and f[3] == "2048" for f in lines)
+
+
+def test_calibrate_records_zero_offsets_in_a_loadable_copy(tmp_path, robot):
+    smap = ServoMap.from_specs(robot.servos)
+    shift = np.array([(-1) ** k * (5 + k) for k in range(smap.n)])
+    bus, chain = emulated_bus(smap, positions=smap.zero_offset + shift)
+    prepare(bus, smap)
+    assert not any(servo.torque_enabled for servo in chain.servos.values())
+    zero = read_zero_pose(bus, smap)
+    out = calibrated_description(robot, zero, tmp_path / "cal" / "op3_like.toml")
+    calibrated = load(out)
+    for old, new, d in zip(robot.servos, calibrated.servos, shift):
+        assert new.zero_offset_ticks == old.zero_offset_ticks + d
+        assert (new.min_ticks, new.max_ticks) == (old.min_ticks + d, old.max_ticks + d)
+        assert (new.id, new.sign, new.joint) == (old.id, old.sign, old.joint)
+    assert calibrated.name == robot.name
+
+
+def test_calibrate_names_a_servo_whose_range_would_leave_the_tick_range(tmp_path, robot):
+    from motok_robot.errors import InputError
+
+    zero = {s.joint: s.zero_offset_ticks for s in robot.servos}
+    zero["r_sho_pitch"] = 2048 + 300  # its range already spans 92..4004
+    with pytest.raises(InputError, match=r"servo 1 \(r_sho_pitch\).*re-seat the servo horn"):
+        calibrated_description(robot, zero, tmp_path / "x.toml")
+
+
+def test_calibrate_cli_on_emulated_chain(tmp_path, capsys):
+    out = tmp_path / "op3_like.toml"
+    assert main(["servo", "calibrate", "--robot", "op3_like", "--emulate", "--yes", "--out", str(out)]) == 0
+    assert "zero offsets of 20 servos" in capsys.readouterr().out
+    assert load(out).servos[0].zero_offset_ticks == 2048
