@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 
 @dataclass
@@ -57,5 +59,17 @@ class GenerationEvalConfig:
     mm_repeats: int = 30
     mm_times: int = 10
     max_clips: int | None = None
+    batch_size: int = 64  #: texts per generator call
     seed: int = 0
     extra: dict = field(default_factory=dict)
+
+
+def models_dir() -> Path:
+    """``$MOTOK_ROBOT_MODELS`` or ``models/`` at the repository root (as the planner's generate API)."""
+    env = os.environ.get("MOTOK_ROBOT_MODELS")
+    return Path(env) if env else Path(__file__).resolve().parents[2] / "models"
+
+
+def default_evaluator_dir() -> Path:
+    """Where ``motok-robot train evaluator`` writes and ``eval generation`` reads by default."""
+    return models_dir() / "evaluator"

@@ -44,6 +44,9 @@ class MotionEncoder(nn.Module):
         self.out = nn.Linear(w, cfg.latent_dim)
 
     def forward(self, features: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+        # frames past each length are zeroed, so the embedding does not depend on the padding
+        valid = torch.arange(features.shape[1], device=features.device)[None, :] < lengths[:, None]
+        features = features * valid.unsqueeze(-1).to(features.dtype)
         h = self.stem(features.transpose(1, 2)).transpose(1, 2)  # [B, T/4, w]
         n = h.shape[1]
         if n > self.position.shape[1]:
@@ -82,10 +85,12 @@ class TextMotionEvaluator(nn.Module):
         self.log_scale = nn.Parameter(torch.tensor(math.log(1.0 / cfg.temperature)))
 
     def embed_motion(self, raw_features: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
-        """Raw (unnormalised) features ``[B, T, 263]`` -> ``[B, latent]``."""
+        """Raw (unnormalised) features ``[B, T, 263]`` (zero padded past ``lengths [B]`` frames,
+        padding ignored) -> unit embeddings ``[B, latent]``."""
         return self.motion((raw_features - self.mean) / self.std, lengths)
 
     def embed_text(self, sentence_embedding: torch.Tensor) -> torch.Tensor:
+        """Frozen sentence-encoder output ``[B, text_dim]`` -> unit embeddings ``[B, latent]``."""
         return self.text(sentence_embedding)
 
     def contrastive_loss(self, text_z: torch.Tensor, motion_z: torch.Tensor, same_text: torch.Tensor) -> torch.Tensor:

@@ -91,6 +91,38 @@ def validation_r_precision(model: TextMotionEvaluator, clips: CaptionedClips, cf
     return metrics.r_precision(text_all, motion_all)
 
 
+class CachedTextEmbedder:
+    """Wrap ``encode(list[str]) -> [B, D]`` with a file cache ``cache_file`` (``.npz``: ``texts``
+    unicode ``[N]``, ``vectors`` float32 ``[N, D]``, ``encoder`` name), so a resumed or repeated
+    training does not embed the captions again. A cache written by another encoder is ignored."""
+
+    def __init__(self, encode, encoder_name: str, cache_file: str | Path):
+        self.encode = encode
+        self.encoder_name = encoder_name
+        self.cache_file = Path(cache_file)
+        self.table: dict[str, np.ndarray] = {}
+        if self.cache_file.is_file():
+            try:
+                with np.load(self.cache_file, allow_pickle=False) as data:
+                    if str(data["encoder"]) == encoder_name:
+                        self.table = dict(zip(data["texts"].tolist(), data["vectors"]))
+            except (OSError, KeyError, ValueError):
+                self.table = {}  # unreadable cache: embed again and overwrite it
+
+    def __call__(self, texts: list[str]) -> np.ndarray:
+        missing = [t for t in dict.fromkeys(texts) if t not in self.table]
+        if missing:
+            vectors = np.asarray(self.encode(missing), np.float32)
+            self.table.update(zip(missing, vectors))
+            self.cache_file.parent.mkdir(parents=True, exist_ok=True)
+            tmp = self.cache_file.with_name(self.cache_file.name + ".tmp.npz")
+            keys = list(self.table)
+            np.savez(tmp, texts=np.array(keys, dtype=str), vectors=np.stack([self.table[k] for k in keys]),
+                     encoder=np.array(self.encoder_name))
+            tmp.replace(self.cache_file)
+        return np.stack([self.table[t] for t in texts]) if texts else np.zeros((0, 0), np.float32)
+
+
 def train_evaluator(
     train_set,
     val_set,
@@ -100,8 +132,15 @@ def train_evaluator(
     cfg: EvaluatorConfig | None = None,
     resume: bool = False,
     device: str = "cpu",
+    meta: dict | None = None,
 ) -> Path:
-    """Train and save to ``out_dir``; returns the run directory."""
+    """Train and save to ``out_dir``; returns the run directory.
+
+    ``train_set``/``val_set``: splits with ``clip_ids``, ``features(id)``, ``texts(id)`` and
+    (train) ``mean``/``std`` (e.g. :class:`motok_robot.data.dataset.PreparedDataset`);
+    ``embed_text``: captions -> frozen sentence embeddings ``[B, text_dim]``; ``meta``: extra
+    JSON-able facts (training command, data folder) written to ``training.json``.
+    """
     cfg = cfg or EvaluatorConfig()
     run = Path(out_dir)
     run.mkdir(parents=True, exist_ok=True)
@@ -148,5 +187,6 @@ def train_evaluator(
                 save_evaluator(model, run)
                 save_training_state(state_file, model, optimiser, step)
         bar.close()
-    (run / "training.json").write_text(json.dumps({"steps": step, "train_clips": len(train), "val_clips": len(val)}, indent=2))
+    info = {"steps": step, "train_clips": len(train), "val_clips": len(val), **(meta or {})}
+    (run / "training.json").write_text(json.dumps(info, indent=2))
     return run

@@ -1,0 +1,108 @@
+"""Sanity checks of a text-motion evaluator on real motions (``motok-robot eval evaluator``).
+
+An evaluator is worth using when (issue 10's acceptance):
+
+* ``fid_test_vs_train`` is small: two sets of real motions are close. For scale the report also
+  gives ``fid_frozen``, the FID between the real test windows and the same windows frozen at
+  their first frame (a clearly wrong "motion" with the right poses); the check asks for
+  ``fid_test_vs_train < fid_frozen / 10``;
+* R-precision collapses with shuffled captions: top-1 below twice chance (2/32), while the
+  matched top-1 is at least three times chance;
+* results repeat: the same seed gives identical numbers, and a different sampling seed gives
+  means within the two runs' 95 % confidence intervals (summed) for at least 80 % of the
+  row/metric pairs (with 95 % intervals from a few repeats, an occasional miss is expected).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from motok_robot.eval import metrics
+from motok_robot.eval.config import GenerationEvalConfig
+from motok_robot.eval.protocol import CONTROL_ROW, METRICS, REFERENCE_ROW, EvalClip, EvalResult, draw, run_protocol
+
+#: share of row/metric means that must agree within the summed CIs between two sampling seeds
+MIN_AGREEMENT = 0.8
+
+
+@dataclass
+class SanityReport:
+    result: EvalResult
+    checks: dict[str, dict] = field(default_factory=dict)
+
+    @property
+    def passed(self) -> bool:
+        return all(c["passed"] for c in self.checks.values())
+
+    def to_dict(self) -> dict:
+        return {**self.result.to_dict(), "sanity": {"passed": self.passed, "checks": self.checks}}
+
+
+def frozen_windows(windows: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """Each window ``[T, 263]`` replaced by its first frame repeated ``T`` times."""
+    return [np.repeat(w[:1], len(w), axis=0) for w in windows]
+
+
+def repeat_agreement(a: EvalResult, b: EvalResult, rows: Sequence[str] = (REFERENCE_ROW, CONTROL_ROW)) -> dict[str, dict]:
+    """Per ``row/metric``: the two means, their summed CI half-widths and whether they agree."""
+    out = {}
+    for row in rows:
+        ra, rb = a.row(row), b.row(row)
+        for key in METRICS:
+            if key in ra.metrics and key in rb.metrics:
+                va, vb = ra.metrics[key], rb.metrics[key]
+                tolerance = va.ci95 + vb.ci95
+                out[f"{row}/{key}"] = {"a": va.mean, "b": vb.mean, "tolerance": tolerance,
+                                       "agree": bool(abs(va.mean - vb.mean) <= tolerance + 1e-12)}
+    return out
+
+
+def evaluator_sanity(clips: Sequence[EvalClip], embedder, cfg: GenerationEvalConfig | None = None,
+                     reference_clips: Sequence[EvalClip] | None = None) -> SanityReport:
+    """Run the protocol without generators three times (seed, the same seed again, seed + 1)
+    and compute the checks listed in the module docstring."""
+    cfg = cfg or GenerationEvalConfig()
+    first = run_protocol(clips, embedder, None, cfg, reference_clips, progress=False)
+    again = run_protocol(clips, embedder, None, cfg, reference_clips, progress=False)
+    other = run_protocol(clips, embedder, None, replace(cfg, seed=cfg.seed + 1), reference_clips, progress=False)
+    report = SanityReport(first)
+    chance = 1.0 / cfg.r_precision_batch
+    ref, ctl = first.row(REFERENCE_ROW), first.row(CONTROL_ROW)
+
+    windows = draw(list(clips), np.random.default_rng([cfg.seed, 0]), embedder.max_frames).windows(list(clips))
+    real_z = embedder.embed_motion(windows)
+    fid_frozen = metrics.fid(real_z, embedder.embed_motion(frozen_windows(windows)))
+    if "fid" in ref.metrics:
+        fid_tt = ref.metrics["fid"].mean
+        report.checks["fid_test_vs_train_small"] = {
+            "passed": bool(fid_tt < fid_frozen / 10), "fid_test_vs_train": fid_tt, "fid_frozen": fid_frozen,
+            "rule": "fid_test_vs_train < fid_frozen / 10"}
+    r1, r1_shuffled = ref.metrics["r_precision_top1"].mean, ctl.metrics["r_precision_top1"].mean
+    report.checks["matched_above_chance"] = {"passed": bool(r1 >= 3 * chance), "r_precision_top1": r1,
+                                             "chance": chance, "rule": "top-1 >= 3 x chance"}
+    report.checks["shuffled_near_chance"] = {"passed": bool(r1_shuffled < 2 * chance), "r_precision_top1": r1_shuffled,
+                                             "chance": chance, "rule": "shuffled top-1 < 2 x chance"}
+    identical = first.to_dict()["rows"] == again.to_dict()["rows"]
+    report.checks["same_seed_identical"] = {"passed": bool(identical), "rule": "same seed -> identical values"}
+    agreement = repeat_agreement(first, other)
+    share = float(np.mean([v["agree"] for v in agreement.values()]))
+    report.checks["other_seed_within_ci"] = {
+        "passed": share >= MIN_AGREEMENT, "seed_a": cfg.seed, "seed_b": cfg.seed + 1, "share_agreeing": share,
+        "metrics": agreement,
+        "rule": f"|mean_a - mean_b| <= ci_a + ci_b for at least {MIN_AGREEMENT:.0%} of the metrics"}
+    return report
+
+
+def format_sanity(report: SanityReport) -> str:
+    lines = [f"Sanity: {'PASSED' if report.passed else 'FAILED'}"]
+    for name, check in report.checks.items():
+        facts = ", ".join(f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}"
+                          for k, v in check.items() if k not in ("passed", "rule", "metrics"))
+        if name == "other_seed_within_ci":
+            bad = [k for k, v in check["metrics"].items() if not v["agree"]]
+            facts += f", disagreeing: {bad or 'none'}"
+        lines.append(f"- {name}: {'pass' if check['passed'] else 'FAIL'} ({check['rule']}; {facts})")
+    return "\n".join(lines)
