@@ -60,16 +60,15 @@ def plot_balance(result, path: Path, plt) -> Path:
     fig, ax = plt.subplots(figsize=(8, 7))
     from matplotlib.patches import Polygon
 
-    step = max(1, len(kin.support) // 200)
-    for t in range(0, len(kin.support), step):
-        hull = kin.support[t]
-        if len(hull) >= 3:
-            ax.add_patch(Polygon(hull, closed=True, facecolor="tab:green", edgecolor="none", alpha=0.04))
-    for t in (0, len(kin.support) - 1):
-        hull = kin.support[t]
-        if len(hull) >= 3:
-            ax.add_patch(Polygon(hull, closed=True, fill=False, edgecolor="tab:green", lw=1.0,
-                                 ls="-" if t == 0 else "--"))
+    seen = set()
+    for hull in kin.support:  # each distinct support polygon once (a planted stance repeats)
+        if len(hull) < 3:
+            continue
+        key = tuple(np.round(hull, 3).ravel())
+        if key in seen:
+            continue
+        seen.add(key)
+        ax.add_patch(Polygon(hull, closed=True, facecolor="tab:green", edgecolor="darkgreen", lw=0.5, alpha=0.12))
     ax.plot(kin.com[:, 0], kin.com[:, 1], color="tab:blue", lw=1.8, label="CoM ground projection")
     ax.plot(kin.zmp[:, 0], kin.zmp[:, 1], color="tab:orange", lw=1.0, alpha=0.9, label=f"ZMP ({cfg['zmp_model']})")
     outside = np.isfinite(kin.zmp_margin) & (kin.zmp_margin < -cfg["zmp_tolerance_m"])
@@ -86,7 +85,7 @@ def plot_balance(result, path: Path, plt) -> Path:
         if keep.any():
             ax.plot(roll.cop[keep, 0], roll.cop[keep, 1], ".", ms=3, color="tab:purple", alpha=0.7,
                     label="CoP (physics, before any fall)")
-    ax.plot([], [], color="tab:green", lw=6, alpha=0.3, label="support polygons (feet in contact)")
+    ax.plot([], [], color="tab:green", lw=6, alpha=0.3, label=f"support polygons ({len(seen)} distinct)")
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
