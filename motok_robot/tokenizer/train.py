@@ -34,6 +34,7 @@ from motok_robot.tokenizer.model import MoTok
 from motok_robot.tokenizer.quantizer import code_statistics
 
 STATE_FILE = "train_state.safetensors"
+RESUME_OVERRIDES = ("steps", "epochs", "device", "num_threads")
 METRICS_FILE = "metrics.csv"
 METRIC_COLUMNS = (
     "epoch",
@@ -190,13 +191,15 @@ def train_tokenizer(
     train_config: TrainConfig | None = None,
     *,
     resume: bool = False,
+    overrides: dict[str, Any] | None = None,
     progress: bool | None = None,
     stop_at: int | None = None,
 ) -> dict[str, Any]:
     """Train a tokenizer into run directory ``out``; return a summary dict.
 
-    ``resume=True`` continues from ``out``'s last checkpoint (its config.json wins over the
-    given configs, except for ``steps``/``epochs`` which may be raised to train longer).
+    ``resume=True`` continues from ``out``'s last checkpoint with the run's own config.json
+    (the config arguments are ignored); ``overrides`` may change ``steps``, ``epochs``,
+    ``device`` and ``num_threads`` (e.g. to train longer).
     ``stop_at`` ends the run after that step with a checkpoint (used to test resuming).
     """
     out = Path(out)
@@ -209,11 +212,12 @@ def train_tokenizer(
         saved = read_run_config(out)
         tok_cfg = tokenizer_config_from_dict(saved["tokenizer"], where=f"{out / CONFIG_FILE} 'tokenizer'")
         saved_train = dict(saved.get("train") or {})
-        if train_config is not None:  # allow extending the run
-            saved_train["steps"] = train_config.steps or saved_train.get("steps", 0)
-            saved_train["epochs"] = train_config.epochs if not train_config.steps else saved_train.get("epochs", cfg.epochs)
-            saved_train["device"] = train_config.device
-            saved_train["num_threads"] = train_config.num_threads
+        for key, value in (overrides or {}).items():
+            if key not in RESUME_OVERRIDES:
+                raise InputError(f"resume: {key!r} cannot change when resuming (only {sorted(RESUME_OVERRIDES)})")
+            saved_train[key] = value
+        if (overrides or {}).get("epochs") is not None and "steps" not in (overrides or {}):
+            saved_train["steps"] = 0  # --epochs given: the epoch count decides the length
         cfg = train_config_from_dict(saved_train, where=f"{out / CONFIG_FILE} 'train'")
     elif (out / WEIGHTS_FILE).exists() or state_path.exists():
         raise InputError(f"{out}: already holds a tokenizer run; pass --resume to continue it or choose a new --out")
