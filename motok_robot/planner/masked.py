@@ -121,11 +121,16 @@ class MaskedPlanner(Planner):
         n_free = free.sum(1)
         generator = torch.Generator().manual_seed(int(seed))
         guide = always_guide or cfg_scale != 1.0
-        uncond = cond.without_global() if guide else None
+        if guide:  # conditional and unconditional branches as one batch of 2B
+            both = cond.select(torch.cat([torch.arange(b), torch.arange(b)]))
+            drop = torch.arange(2 * b, device=device) >= b
+            n_both = torch.cat([n, n])
         for step in range(steps):
-            logits = self.logits(ids, n, cond)
             if guide:
-                logits = guided_logits(logits, self.logits(ids, n, uncond), cfg_scale)
+                out = self.logits(torch.cat([ids, ids]), n_both, both, drop)
+                logits = guided_logits(out[:b], out[b:], cfg_scale)
+            else:
+                logits = self.logits(ids, n, cond)
             sampled = sample_logits(logits, temperature, generator, top_k, top_p)
             candidate = torch.where((ids == self.mask_id) & free, sampled, ids)
             logp = logits.log_softmax(-1).gather(-1, candidate.clamp(0, k - 1)[..., None])[..., 0]
