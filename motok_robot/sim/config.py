@@ -101,7 +101,7 @@ class ValidationConfig:
     max_tracking_rmse_rad: float = 0.15
     #: fail when the root body ends farther than this (horizontally) from the reference (m)
     #: per metre of robot height -- the threshold scales with robot size.
-    max_base_drift_per_height: float = 0.5
+    max_base_drift_per_height: float = 0.25
     #: centre of pressure sampling rate in the rollout (Hz); contact forces are read there.
     cop_rate_hz: float = 25.0
     #: fail when more than this fraction of CoP samples with contact lie outside the support

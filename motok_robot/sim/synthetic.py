@@ -107,7 +107,7 @@ def _with_base_and_feet(index, ik, base_xyz, feet) -> np.ndarray:
     return out
 
 
-def walk(index: RobotIndex, steps: int = 4, step_period_s: float = 2.4, fps: float = 20.0,
+def walk(index: RobotIndex, steps: int = 4, step_period_s: float = 3.2, fps: float = 20.0,
          double_support: float = 0.5) -> np.ndarray:
     """A slow forward walk of ``steps`` steps with the feet planted while loaded.
 

@@ -1,4 +1,4 @@
-"""A tiny 16-joint humanoid for the validation tests and examples.
+"""A tiny 18-joint humanoid for the validation tests and examples.
 
 :func:`tiny_humanoid` returns an object with the attributes of ``motok_robot.robots.Robot``
 (docs/CONTRACTS.md) that validation reads, built from an MJCF string written here.  It lets
