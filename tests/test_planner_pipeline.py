@@ -187,3 +187,29 @@ def test_generate_prompts_action_unconditional_and_python_api(runs, tmp_path):
     follow = motok_robot.generate("a person walks forward", seed=2, tokenizer_run=runs / "tok",
                                   planner_run=runs / "masked", trajectory=traj)
     assert follow.joints.shape[0] == 40
+
+
+def test_generator_hooks_for_the_control_stage(runs):
+    """``local`` conditions, a ``decode`` hook and kept tokens, as the control stage uses them."""
+    from motok_robot.errors import InputError
+    from motok_robot.planner.conditions import LocalConditions
+    from motok_robot.planner.generate import load_generator
+
+    gen = load_generator("masked", runs / "tok", runs / "masked")
+    calls = []
+
+    def decode(tokenizer, tokens, length, steps, seed):
+        calls.append((tuple(tokens.shape), length, seed))
+        return tokenizer.decode(tokens, length=length, steps=steps, seed=seed)
+
+    local = LocalConditions.from_arrays(22, trajectory=np.zeros((22, 2)))
+    motion = gen.generate("a person walks forward", seed=1, local=local, decode=decode)
+    assert motion.joints.shape[0] == 22 and calls == [((1, 6), 22, 1)]
+    keep = np.array([3, -1, 5, -1, -1, 7])
+    edited = gen.generate("a person walks forward", seconds=1.2, seed=1, keep_tokens=keep)
+    assert edited.tokens[[0, 2, 5]].tolist() == [3, 5, 7]
+    with pytest.raises(InputError, match="local conditions cover"):
+        gen.generate("a person walks forward", seconds=2.0, local=local)
+    ar = load_generator("ar", runs / "tok", runs / "ar")
+    with pytest.raises(InputError, match="masked planner"):
+        ar.generate("a person walks forward", seconds=1.2, keep_tokens=keep)

@@ -12,6 +12,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from motok_robot.errors import InputError
 from motok_robot.planner.base import Planner
 from motok_robot.planner.conditions import Conditions
 from motok_robot.planner.config import PlannerConfig
@@ -82,6 +83,8 @@ class ARPlanner(Planner):
         latest after the local conditions' length, or ``max_tokens``).  Uses a key/value cache;
         the conditional and unconditional (guidance) branches run as one batch.
         """
+        if _ignored.get("keep_tokens") is not None:
+            raise InputError("token inpainting (keep_tokens) needs the masked planner (--planner masked)")
         b = cond.batch_size
         device = self.device
         fixed_length = n_tokens is not None

@@ -183,8 +183,17 @@ class MotionGenerator:
         top_p: float | None = None,
         trajectory: np.ndarray | None = None,
         keep_tokens: np.ndarray | None = None,
+        local=None,
+        decode=None,
     ) -> GeneratedMotion:
-        """Generate one motion; see :func:`generate` for the arguments."""
+        """Generate one motion; see :func:`generate` for the arguments.
+
+        Extra hooks for the control stage: ``local`` -- ready-made
+        :class:`~motok_robot.planner.conditions.LocalConditions` (B = 1, T frames; sets T when
+        ``seconds`` is None); ``decode(tokenizer, tokens [1, N], length, steps, seed) -> features
+        [1, T, 263]`` replaces the plain ``tokenizer.decode`` (e.g. decoding with guidance);
+        ``keep_tokens`` ``[N]`` (``-1`` = free) fixes tokens (masked planner: inpainting).
+        """
         from motok_robot.motion.features import joints_from_features
         from motok_robot.planner.conditions import Conditions, LocalConditions
 
@@ -211,9 +220,12 @@ class MotionGenerator:
         timings["text"] = time.perf_counter() - t0
 
         ds = cfg.downsample
+        if trajectory is not None and local is not None:
+            raise InputError("give either a trajectory or local conditions, not both")
         if seconds is None and trajectory is not None:
-            frames = int(np.asarray(trajectory).shape[0])
-            seconds = frames / cfg.fps
+            seconds = int(np.asarray(trajectory).shape[0]) / cfg.fps
+        if seconds is None and local is not None:
+            seconds = local.frames / cfg.fps
         if seconds is not None:
             frames = self.frames_for(seconds)
             n_tokens = -(-frames // ds)
@@ -225,6 +237,11 @@ class MotionGenerator:
             n_tokens = -(-frames // ds)
         if trajectory is not None:
             cond.local = LocalConditions.from_arrays(frames, trajectory=trajectory).to(self.device)
+        if local is not None:
+            if local.batch_size != 1 or local.frames != frames:
+                raise InputError(f"local conditions cover {local.batch_size} x {local.frames} frames, "
+                                 f"expected 1 x {frames} ({frames / cfg.fps:g} s)")
+            cond.local = local.to(self.device)
 
         t1 = time.perf_counter()
         tokens = self.planner.plan(
@@ -239,8 +256,13 @@ class MotionGenerator:
         )
         timings["plan"] = time.perf_counter() - t1
         t2 = time.perf_counter()
-        features = self.tokenizer.decode(tokens, length=frames, steps=decoder_steps or defaults.decoder_steps,
-                                         seed=int(seed))
+        steps_dec = decoder_steps or defaults.decoder_steps
+        if decode is None:
+            features = self.tokenizer.decode(tokens, length=frames, steps=steps_dec, seed=int(seed))
+        else:
+            features = decode(self.tokenizer, tokens, frames, steps_dec, int(seed))
+            if tuple(features.shape) != (1, frames, 263):
+                raise InputError(f"decode hook returned shape {tuple(features.shape)}, expected (1, {frames}, 263)")
         timings["decode"] = time.perf_counter() - t2
         t3 = time.perf_counter()
         feats = features[0].detach().cpu().numpy().astype(np.float32)
