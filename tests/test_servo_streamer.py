@@ -79,7 +79,7 @@ def test_preflight_sets_up_the_servos(smap):
         servo = chain.servos[int(servo_id)]
         assert servo.torque_enabled
         assert servo.table[ct.ADDR_RETURN_DELAY_TIME] == 0
-        assert servo.table[ct.ADDR_BUS_WATCHDOG] == 5
+        assert servo.table[ct.ADDR_BUS_WATCHDOG] == 0  # armed when streaming starts
         assert servo.peek(ct.ADDR_PROFILE_VELOCITY, 4) == ct.velocity_units_from_rad_s(4.8)
 
 
@@ -197,6 +197,21 @@ def test_fault_hardware_error_with_torque_off_on_stop(smap, tmp_path):
     assert "servo 2 (joint_01)" in message and "input voltage" in message
     assert "torque switched off on every servo" in message
     assert not any(servo.torque_enabled for servo in chain.servos.values())
+
+
+def test_host_stall_longer_than_the_bus_watchdog_stops_playback(smap, tmp_path):
+    seen = {}
+
+    def stall(chain):
+        seen["armed"] = chain.servos[1].table[ct.ADDR_BUS_WATCHDOG]
+        chain.clock.advance(0.25)  # the host freezes for 250 ms (watchdog 100 ms)
+
+    message, rows, chain = fault_run(smap, tmp_path, stall, at_tick=30)
+    assert seen["armed"] == 5
+    assert "bus watchdog fired on 20 servo(s)" in message and "servo 1 (joint_00)" in message
+    assert all(servo.table[ct.ADDR_BUS_WATCHDOG] == 0xFF for servo in chain.servos.values())
+    # the servos stopped by themselves: no goal after the stall was accepted
+    assert all(len(servo.goal_history) == 1 + 30 for servo in chain.servos.values())
 
 
 def test_transient_dropouts_within_the_retry_budget_are_survived(smap, tmp_path):

@@ -78,6 +78,10 @@ class ServoRejectedError(ServoError):
     """The servo answered but refused the instruction (access, range, limit error ...)."""
 
 
+class ServoWatchdogError(ServoError):
+    """The servo's bus watchdog fired (the host was silent too long): it stopped and refuses goals."""
+
+
 class ServoAlertError(ServoError):
     """The servo raised its hardware-alert bit; ``bits`` is its Hardware Error Status (70)."""
 
@@ -137,6 +141,10 @@ class ServoBus(abc.ABC):
     @abc.abstractmethod
     def set_bus_watchdog(self, ids: Sequence[int], units: int) -> None:
         """Bus Watchdog (98), 20 ms per unit, 0 = off (writing it also clears a fired watchdog)."""
+
+    @abc.abstractmethod
+    def read_bus_watchdog(self, ids: Sequence[int]) -> dict[int, int]:
+        """Bus Watchdog (98) of every servo in ``ids``: 255 means it fired (goals are refused)."""
 
     @abc.abstractmethod
     def set_return_delay_time(self, ids: Sequence[int], units: int) -> None:
@@ -326,6 +334,9 @@ class DynamixelBus(ServoBus):
                 raise self._comm_error(int(servo_id), result, "read hardware error status")
             out[int(servo_id)] = int(value)
         return out
+
+    def read_bus_watchdog(self, ids):
+        return {int(i): self.read_register(int(i), ct.ADDR_BUS_WATCHDOG, 1) for i in ids}
 
     def read_register(self, servo_id: int, address: int, size: int) -> int:
         """One register (1, 2 or 4 bytes, unsigned) of one servo."""

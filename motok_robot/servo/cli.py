@@ -28,6 +28,9 @@ def register(commands, groups) -> None:
     play.add_argument("--torque-off-on-stop", action="store_true",
                       help="on a fault or Ctrl-C switch torque off instead of holding position")
     play.add_argument("--render", help="with --sim: record the simulated playback to this MP4/GIF")
+    play.add_argument("--no-realtime", action="store_true",
+                      help="do not ask for SCHED_FIFO priority for the control loop (by default it is requested; "
+                           "refused without root/CAP_SYS_NICE, then a warning and normal priority)")
     play.set_defaults(func=_play)
 
     servo = groups["servo"]
@@ -109,6 +112,7 @@ def _play_inner(args: argparse.Namespace) -> int:
         ramp_s=defaults.ramp_s if args.ramp is None else args.ramp,
         retry_budget=defaults.retry_budget if args.retries is None else args.retries,
         on_stop=ON_STOP_TORQUE_OFF if args.torque_off_on_stop else ON_STOP_HOLD,
+        realtime_priority=0 if args.no_realtime else defaults.realtime_priority,
     )
     log_path = Path(args.log) if args.log else path.with_name(path.stem + ".playback.csv")
     rig = None

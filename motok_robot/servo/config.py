@@ -26,6 +26,9 @@ class PlaybackConfig:
         set_profile_velocity: set Profile Velocity to each servo's velocity limit in pre-flight.
         check_models: require each servo's model number to match the servo map.
         spin_s: the last part of each wait (s) spent spinning instead of sleeping.
+        realtime_priority: SCHED_FIFO priority for the real-time loop (Linux, root or
+            CAP_SYS_NICE; warns and runs at normal priority when refused); 0 = off.  Only used
+            with the real clock.
     """
 
     rate_hz: float = 125.0
@@ -39,6 +42,7 @@ class PlaybackConfig:
     set_profile_velocity: bool = True
     check_models: bool = True
     spin_s: float = 0.0005
+    realtime_priority: int = 50
 
     def __post_init__(self) -> None:
         from motok_robot.errors import InputError
@@ -53,5 +57,7 @@ class PlaybackConfig:
             raise InputError("retry_budget must be >= 0 and read_every >= 1")
         if self.on_stop not in (ON_STOP_HOLD, ON_STOP_TORQUE_OFF):
             raise InputError(f"on_stop must be '{ON_STOP_HOLD}' or '{ON_STOP_TORQUE_OFF}', got {self.on_stop!r}")
+        if not 0 <= self.realtime_priority <= 99:
+            raise InputError(f"realtime_priority must lie in 0..99, got {self.realtime_priority}")
         if not 0.0 <= self.watchdog_ms <= 127 * 20:
             raise InputError(f"watchdog_ms must lie in 0..2540, got {self.watchdog_ms}")

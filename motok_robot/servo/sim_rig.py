@@ -166,6 +166,10 @@ class SimRig(ServoBus):
     def set_bus_watchdog(self, ids, units):
         self._check_ids(ids)
 
+    def read_bus_watchdog(self, ids):
+        self._check_ids(ids)
+        return {int(i): 0 for i in ids}  # no watchdog in simulation
+
     def set_return_delay_time(self, ids, units):
         self._check_ids(ids)
 

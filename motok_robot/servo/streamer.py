@@ -9,7 +9,7 @@ Sequence (:func:`play_file`):
 3. **Pre-flight** (:meth:`Streamer.preflight`): ping every ID, check model numbers and
    Hardware Error Status, set Return Delay Time, read present positions (each must lie in its
    limits), set Profile Velocity to the servo's velocity limit, write Goal = present, enable
-   torque, arm the bus watchdog.
+   torque.  The bus watchdog is armed when streaming starts.
 4. **Stream** (:meth:`Streamer.play`): ramp (smoothstep) from the present pose to frame 0 over
    ``ramp_s``, then the trajectory linearly interpolated from its frame rate (20 fps) to the
    control rate (125 Hz).  Every command passes :func:`~motok_robot.servo.convert.limit_command`:
@@ -29,6 +29,7 @@ consecutive writes are never closer than one period and the step limit stays a v
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import warnings
@@ -40,11 +41,18 @@ import numpy as np
 
 from motok_robot.errors import HardwareError, InputError
 from motok_robot.servo import control_table as ct
-from motok_robot.servo.bus import ServoAlertError, ServoBus, ServoCommError, ServoError, ServoRejectedError
+from motok_robot.servo.bus import (
+    ServoAlertError,
+    ServoBus,
+    ServoCommError,
+    ServoError,
+    ServoRejectedError,
+    ServoWatchdogError,
+)
 from motok_robot.servo.config import ON_STOP_HOLD, PlaybackConfig
 from motok_robot.servo.convert import ServoMap, limit_command
 from motok_robot.servo.playback_log import PlaybackLog
-from motok_robot.servo.timing import LoopStats, RealClock, loop_stats
+from motok_robot.servo.timing import LoopStats, RealClock, loop_stats, realtime_priority
 
 
 class PlaybackWarning(UserWarning):
@@ -323,9 +331,6 @@ class Streamer:
             bus.set_profile_velocity(ids, units)
         bus.write_goal_positions(ids, present)  # no jump when torque comes on
         bus.set_torque(ids, True)
-        watchdog_units = int(round(cfg.watchdog_ms / (1e3 * ct.SECONDS_PER_WATCHDOG_UNIT)))
-        if watchdog_units:
-            bus.set_bus_watchdog(ids, watchdog_units)
         self.present = present
         return present
 
@@ -353,59 +358,88 @@ class Streamer:
         done = 0
         log = PlaybackLog(self.log_path, smap.joints) if self.log_path is not None else None
         stop_exc: BaseException | None = None
-        t0 = deadline = clock.now()
-        try:
-            for k in range(n_ticks):
-                clock.sleep_until(deadline)
-                start = clock.now()
-                starts[k], deadlines[k] = start, deadline
-                if self.on_tick is not None:
-                    self.on_tick(k, self)
-                command, nf, lim = limit_command(targets[k], previous, lo, hi, step)
-                if nf.any():
-                    non_finite += int(nf.sum())
-                    if not warned_non_finite:
-                        bad = [self._label(i) for i in np.asarray(ids)[nf]]
-                        warnings.warn(f"non-finite target at tick {k} for {', '.join(bad)}: holding the last safe "
-                                      "command (further occurrences are counted, not warned)", PlaybackWarning,
-                                      stacklevel=2)
-                        warned_non_finite = True
-                limited += int(lim.sum())
-                present_now = None
-                fatal: ServoError | None = None
-                try:
-                    bus.write_goal_positions(ids, command)
-                    if k % cfg.read_every == 0:
-                        present_now = bus.read_present_positions(ids)
-                        last_present = present_now
-                    consecutive = 0
-                except ServoAlertError as exc:
-                    fatal = exc
-                except ServoCommError as exc:
-                    failed_ticks += 1
-                    consecutive += 1
-                    # the first failure that names a servo is the best diagnosis: later ones can be
-                    # confused by late replies still arriving from the servo at fault
-                    if consecutive == 1 or (first_failure.servo_id is None and exc.servo_id is not None):
-                        first_failure = exc
-                    bus.reset()
-                    if consecutive > cfg.retry_budget:
-                        culprit = first_failure
-                        fatal = ServoCommError(culprit.servo_id, f"{culprit.cause}; {consecutive} consecutive failed "
-                                               f"ticks (retry budget {cfg.retry_budget})", culprit.port)
-                previous = command  # sent (a sync write has no reply to prove it arrived)
+        watchdog_units = int(round(cfg.watchdog_ms / (1e3 * ct.SECONDS_PER_WATCHDOG_UNIT)))
+        watchdog_s = watchdog_units * ct.SECONDS_PER_WATCHDOG_UNIT
+        if watchdog_units:  # armed now: from here on the host must talk at least every watchdog_s
+            try:
+                bus.set_bus_watchdog(ids, watchdog_units)
+            except ServoError as exc:
                 if log is not None:
-                    log.write(start - t0, k, "ramp" if is_ramp[k] else "play", command, present_now)
-                if fatal is not None:
+                    log.close()
+                raise HardwareError(f"arming the bus watchdog: {self._describe(exc)}") from None
+        if cfg.realtime_priority and isinstance(clock, RealClock):
+            priority = realtime_priority(cfg.realtime_priority)
+        else:
+            priority = contextlib.nullcontext("SCHED_OTHER")
+        t0 = deadline = last_write = clock.now()
+        try:
+            with priority as policy:
+                if cfg.realtime_priority and not policy.startswith(("SCHED_FIFO", "SCHED_OTHER")):
+                    warnings.warn(f"control loop at {policy}; expect more jitter on a busy host", PlaybackWarning,
+                                  stacklevel=2)
+                for k in range(n_ticks):
+                    clock.sleep_until(deadline)
+                    start = clock.now()
+                    starts[k], deadlines[k] = start, deadline
+                    if self.on_tick is not None:
+                        self.on_tick(k, self)
+                    command, nf, lim = limit_command(targets[k], previous, lo, hi, step)
+                    if nf.any():
+                        non_finite += int(nf.sum())
+                        if not warned_non_finite:
+                            bad = [self._label(i) for i in np.asarray(ids)[nf]]
+                            warnings.warn(f"non-finite target at tick {k} for {', '.join(bad)}: holding the last safe "
+                                          "command (further occurrences are counted, not warned)", PlaybackWarning,
+                                          stacklevel=2)
+                            warned_non_finite = True
+                    limited += int(lim.sum())
+                    present_now = None
+                    fatal: ServoError | None = None
+                    try:
+                        silent = clock.now() - last_write
+                        if watchdog_s and silent > 0.9 * watchdog_s:
+                            # the host was silent long enough for the servos' watchdog to fire: they
+                            # stopped and refuse goals, so streaming on would command nothing
+                            fired = [i for i, v in bus.read_bus_watchdog(ids).items() if v == 0xFF]
+                            if fired:
+                                fatal = ServoWatchdogError(
+                                    fired[0], f"bus watchdog fired on {len(fired)} servo(s): the host was silent for "
+                                    f"{silent * 1e3:.0f} ms (watchdog {cfg.watchdog_ms:g} ms), the servos stopped by "
+                                    "themselves", bus.port_name)
+                        if fatal is None:
+                            bus.write_goal_positions(ids, command)
+                            last_write = clock.now()
+                            if k % cfg.read_every == 0:
+                                present_now = bus.read_present_positions(ids)
+                                last_present = present_now
+                            consecutive = 0
+                    except ServoAlertError as exc:
+                        fatal = exc
+                    except ServoCommError as exc:
+                        failed_ticks += 1
+                        consecutive += 1
+                        # the first failure that names a servo is the best diagnosis: later ones can be
+                        # confused by late replies still arriving from the servo at fault
+                        if consecutive == 1 or (first_failure.servo_id is None and exc.servo_id is not None):
+                            first_failure = exc
+                        bus.reset()
+                        if consecutive > cfg.retry_budget:
+                            culprit = first_failure
+                            fatal = ServoCommError(culprit.servo_id, f"{culprit.cause}; {consecutive} consecutive failed "
+                                                   f"ticks (retry budget {cfg.retry_budget})", culprit.port)
+                    previous = command  # sent (a sync write has no reply to prove it arrived)
+                    if log is not None:
+                        log.write(start - t0, k, "ramp" if is_ramp[k] else "play", command, present_now)
+                    if fatal is not None:
+                        done = k + 1
+                        raise fatal
                     done = k + 1
-                    raise fatal
-                done = k + 1
-                end = clock.now()
-                work[k] = end - start
-                deadline += period
-                if end > deadline:
-                    overruns += 1
-                    deadline = end
+                    end = clock.now()
+                    work[k] = end - start
+                    deadline += period
+                    if end > deadline:
+                        overruns += 1
+                        deadline = end
         except KeyboardInterrupt as exc:
             stop_exc = exc
         except ServoError as exc:
@@ -419,11 +453,14 @@ class Streamer:
             trajectory_s=max(0, done - ramp_ticks - 1) * period, non_finite=non_finite, limited=limited,
             failed_ticks=failed_ticks, log_path=str(self.log_path) if self.log_path else None)
         if stop_exc is None:
+            if log is not None:
+                log.close()
             try:
                 bus.set_bus_watchdog(ids, 0)  # keep holding the last pose without a watchdog
-            finally:
-                if log is not None:
-                    log.close()
+            except ServoError as exc:
+                warnings.warn(f"finished, but could not disarm the bus watchdog ({self._describe(exc)}); the servos "
+                              "hold their last goal and refuse new ones until it is cleared", PlaybackWarning,
+                              stacklevel=2)
             self._write_stats(result)
             if non_finite:
                 warnings.warn(f"{non_finite} non-finite servo targets were replaced by the last safe command",

@@ -8,6 +8,8 @@ instantly: tests run a 10 s trajectory in milliseconds with the same loop code.
 
 from __future__ import annotations
 
+import contextlib
+import os
 import time
 from dataclasses import asdict, dataclass
 
@@ -48,6 +50,30 @@ class FakeClock:
 
     def advance(self, dt: float) -> None:
         self.t += float(dt)
+
+
+@contextlib.contextmanager
+def realtime_priority(priority: int = 50):
+    """Run the body with SCHED_FIFO ``priority`` (Linux; needs root or CAP_SYS_NICE).
+
+    Yields a description of the policy in force; never raises when the OS refuses (then the
+    loop runs at normal priority and the description says why).  The previous policy is
+    restored afterwards.  On a busy machine this is what keeps the loop jitter low: the
+    scheduler wakes the loop on time instead of after another process's time slice.
+    """
+    try:
+        old_policy, old_param = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (AttributeError, OSError) as exc:
+        yield f"normal (real-time priority refused: {exc})"
+        return
+    try:
+        yield f"SCHED_FIFO {priority}"
+    finally:
+        try:
+            os.sched_setscheduler(0, old_policy, old_param)
+        except OSError:
+            pass
 
 
 @dataclass
