@@ -43,11 +43,21 @@ class MotionEncoder(nn.Module):
         nn.init.normal_(self.position, std=0.02)
         self.out = nn.Linear(w, cfg.latent_dim)
 
+    @staticmethod
+    def _valid(steps: int, lengths: torch.Tensor) -> torch.Tensor:
+        """``[B, 1, steps]`` mask of the steps before each length (the conv layers' padding is zero)."""
+        return (torch.arange(steps, device=lengths.device)[None, :] < lengths[:, None]).unsqueeze(1).float()
+
     def forward(self, features: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
         # frames past each length are zeroed, so the embedding does not depend on the padding
-        valid = torch.arange(features.shape[1], device=features.device)[None, :] < lengths[:, None]
-        features = features * valid.unsqueeze(-1).to(features.dtype)
-        h = self.stem(features.transpose(1, 2)).transpose(1, 2)  # [B, T/4, w]
+        # (and the clip is padded to a multiple of 4 frames, so every token sees the same frames)
+        extra = -features.shape[1] % 4
+        if extra:
+            features = F.pad(features, (0, 0, 0, extra))
+        h = features.transpose(1, 2) * self._valid(features.shape[1], lengths)  # [B, F, T]
+        h = self.stem[1](self.stem[0](h))  # [B, w, T/2]
+        h = h * self._valid(h.shape[2], (lengths + 1) // 2)
+        h = self.stem[3](self.stem[2](h)).transpose(1, 2)  # [B, T/4, w]
         n = h.shape[1]
         if n > self.position.shape[1]:
             raise InputError(f"motion of {features.shape[1]} frames is longer than the evaluator's maximum")

@@ -1,0 +1,75 @@
+"""The protocol's adapters over motok-robot's evaluator and the official HumanML3D one."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from motok_robot.errors import InputError  # noqa: E402
+from motok_robot.eval.config import EvaluatorConfig  # noqa: E402
+from motok_robot.eval.embedders import (  # noqa: E402
+    OfficialEmbedder,
+    OwnEvaluatorEmbedder,
+    humanml3d_token_captions,
+    pad_batch,
+)
+from motok_robot.eval.evaluator import TextMotionEvaluator  # noqa: E402
+from motok_robot.eval.official import load_official_evaluator  # noqa: E402
+
+torch.set_num_threads(1)
+
+
+def tiny_evaluator(seed=0):
+    torch.manual_seed(seed)
+    cfg = EvaluatorConfig(width=32, latent_dim=16, layers=1, heads=2, max_frames=80)
+    rng = np.random.default_rng(seed)
+    return TextMotionEvaluator(cfg, 8, rng.normal(size=263).astype(np.float32), rng.uniform(0.5, 2, 263).astype(np.float32))
+
+
+def test_pad_batch_shapes_and_limits():
+    feats, lengths = pad_batch([np.ones((5, 263)), np.ones((3, 263))])
+    assert feats.shape == (2, 5, 263) and lengths.tolist() == [5, 3] and feats[1, 3:].sum() == 0
+    with pytest.raises(InputError, match="longer than the evaluator's 4"):
+        pad_batch([np.ones((5, 263))], max_frames=4)
+
+
+def test_own_embedder_is_unit_norm_and_independent_of_batch_padding():
+    model = tiny_evaluator()
+    embedder = OwnEvaluatorEmbedder(model, encode_text=lambda texts: np.eye(8)[[len(t) % 8 for t in texts]], batch_size=2)
+    rng = np.random.default_rng(1)
+    motions = [rng.normal(size=(n, 263)).astype(np.float32) for n in (41, 80, 57, 63, 44)]
+    together = embedder.embed_motion(motions)
+    alone = np.concatenate([embedder.embed_motion([m]) for m in motions])
+    np.testing.assert_allclose(together, alone, atol=1e-5)  # batch composition and padding do not matter
+    np.testing.assert_allclose(np.linalg.norm(together, axis=1), 1.0, atol=1e-6)
+    t = embedder.embed_text(["a", "bb", "a"])
+    assert t.shape == (3, 16) and np.allclose(t[0], t[2]) and not np.allclose(t[0], t[1])
+    assert embedder.min_frames == 40 and embedder.max_frames == 80
+
+
+def test_official_embedder_reads_pos_tagged_captions(tmp_path):
+    from test_eval_official import write_release
+
+    evaluator = load_official_evaluator(*write_release(tmp_path))
+    texts = tmp_path / "texts"
+    texts.mkdir()
+    (texts / "000001.txt").write_text("A person walks left.#a/DET person/NOUN walk/VERB left/ADV#0.0#0.0\n")
+    (texts / "M000001.txt").write_text("a person walks right#a/DET person/NOUN walk/VERB right/ADV#0.0#0.0\n")
+    table = humanml3d_token_captions(texts)
+    assert table["a person walks left."] == "a/DET person/NOUN walk/VERB left/ADV"
+    embedder = OfficialEmbedder(evaluator, table)
+    z = embedder.embed_text(["a  person walks LEFT.", "a/DET person/NOUN walk/VERB left/ADV"])
+    np.testing.assert_allclose(z[0], z[1], atol=1e-6)  # plain caption -> its token string
+    with pytest.raises(InputError, match="'a zebra dances' has no HumanML3D token string"):
+        embedder.embed_text(["a zebra dances"])
+    motions = [np.random.default_rng(0).normal(size=(n, 263)).astype(np.float32) for n in (43, 40)]
+    m = embedder.embed_motion(motions)
+    assert m.shape == (2, 8)
+    # cropped to a multiple of 4 frames, as the official evaluation does
+    np.testing.assert_allclose(m[0], embedder.embed_motion([motions[0][:40]])[0], atol=1e-5)
+    with pytest.raises(InputError, match="no HumanML3D caption lines"):
+        humanml3d_token_captions(tmp_path / "glove")
+    with pytest.raises(InputError, match="does not exist"):
+        humanml3d_token_captions(tmp_path / "missing")
