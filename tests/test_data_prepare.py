@@ -204,3 +204,28 @@ def test_split_is_deterministic_and_roughly_85_5_10():
 def test_dataset_reader_errors(tmp_path):
     with pytest.raises(InputError, match="not a prepared dataset"):
         PreparedDataset(tmp_path)
+
+
+def test_show_renders_a_prepared_clip(tmp_path, capsys):
+    src = tmp_path / "bvh"
+    src.mkdir()
+    (src / "walk.bvh").write_text(canonical_bvh_text(frames=12))
+    out = tmp_path / "out"
+    assert _run("--source", f"bvh={src}", "--out", str(out), "--map", str(identity_map(tmp_path / "m.json")),
+                "--workers", "1") == 0
+    gif = tmp_path / "walk.gif"
+    assert main(["data", "show", str(out), "--clip", "bvh/walk", "--out", str(gif)]) == 0
+    assert gif.stat().st_size > 1000 and gif.read_bytes()[:3] == b"GIF"
+    capsys.readouterr()
+    assert main(["data", "show", str(out), "--clip", "walk", "--out", str(gif)]) == 2
+    assert "no clip 'walk'; did you mean ['bvh/walk', 'mirror/bvh/walk']" in capsys.readouterr().err
+    assert main(["data", "show", str(out), "--clip", "bvh/walk", "--out", str(tmp_path / "x.avi")]) == 2
+
+
+def test_data_modules_do_not_import_torch():
+    import subprocess
+    import sys
+
+    code = ("import sys, motok_robot.data.prepare, motok_robot.data.dataset, motok_robot.data.cli, "
+            "motok_robot.data.sources, motok_robot.data.humanml3d; print('torch' in sys.modules)")
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "False"

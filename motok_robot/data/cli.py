@@ -100,6 +100,8 @@ def _show(args: argparse.Namespace) -> int:
         raise
     rec = ds.record(args.clip)
     title = f"{args.clip}: {rec['texts'][0]}" if rec["texts"] else args.clip
+    if len(title) > 64:
+        title = title[:63] + "\u2026"
     render_stick_figure(ds.joints(args.clip), out, fps=rec["fps"], title=title)
     print(f"wrote {out}")
     return 0

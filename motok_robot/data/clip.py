@@ -77,6 +77,29 @@ def check_joints(joints: np.ndarray, where: str, min_frames: int = 2) -> np.ndar
     return joints.astype(np.float32)
 
 
+_STATURE_CHAIN = ("left_ankle", "left_knee", "left_hip", "pelvis", "spine1", "spine2", "spine3", "neck", "head")
+#: stature of the canonical rest pose (m), whose joints the skeleton module places
+CANONICAL_STATURE_M = 1.72
+
+
+def stature(joints: np.ndarray) -> float:
+    """Body height estimate (m) of ``joints[T, 22, 3]`` (metres), independent of posture.
+
+    The median over frames of the ankle-knee-hip-pelvis-spine-neck-head joint chain length,
+    scaled by the canonical body's stature / chain length (1.72 m / 1.55 m).  A unit or
+    joint-map sanity check: real adult bodies give 1.4-2.0 m.
+    """
+    from motok_robot.motion.skeleton import JOINT_INDEX, rest_pose
+
+    def chain(j):
+        return sum(
+            np.linalg.norm(j[..., JOINT_INDEX[a], :] - j[..., JOINT_INDEX[b], :], axis=-1)
+            for a, b in zip(_STATURE_CHAIN[:-1], _STATURE_CHAIN[1:])
+        )
+
+    return float(np.median(chain(np.asarray(joints, dtype=np.float64))) * CANONICAL_STATURE_M / chain(rest_pose()))
+
+
 # ----------------------------------------------------------------------------- axes
 
 _AXIS = {"x": 0, "y": 1, "z": 2}

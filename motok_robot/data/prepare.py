@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from motok_robot.data import sources as S
-from motok_robot.data.clip import Clip
+from motok_robot.data.clip import Clip, stature
 from motok_robot.data.texts import mirror_text
 from motok_robot.errors import InputError
 
@@ -70,14 +70,6 @@ def split_of(group: str, seed: int = 0) -> str:
     if h < SPLIT_FRACTIONS["train"] + SPLIT_FRACTIONS["val"]:
         return "val"
     return "test"
-
-
-def _body_height(joints: np.ndarray) -> float:
-    """Median height (m) of the head joint above the lower ankle: a unit sanity check."""
-    from motok_robot.motion.skeleton import JOINT_INDEX as J
-
-    feet = np.minimum(joints[:, J["left_ankle"], 2], joints[:, J["right_ankle"], 2])
-    return float(np.median(joints[:, J["head"], 2] - feet))
 
 
 # ----------------------------------------------------------------------------- worker
@@ -132,7 +124,7 @@ def _record(clip: Clip, F, mirror_of: str | None) -> dict:
         "derived_joints": list(clip.derived_joints),
         "group": clip.labels.get("group", clip.id),
         "given_split": clip.labels.get("split"),
-        "height_m": round(_body_height(clip.joints), 3) if clip.features is None else None,
+        "height_m": round(stature(clip.joints), 3) if clip.features is None else None,
         "digest": hashlib.sha1(np.round(clip.joints, 4).tobytes()).hexdigest(),
         "_joints": joints,
         "_features": feats,
@@ -246,8 +238,8 @@ def prepare(cfg: PrepareConfig) -> dict:
                 st.frames += r["frames"]
                 if r["height_m"] is not None:
                     st.heights.append(r["height_m"])
-                    if not 1.0 <= r["height_m"] <= 2.3:
-                        msg = f"{r['file']}: head is {r['height_m']:.2f} m above the ankles; check units/joint map"
+                    if not 1.2 <= r["height_m"] <= 2.3:
+                        msg = f"{r['file']}: the body is {r['height_m']:.2f} m tall; check the units / joint map"
                         warnings.append(msg)
                         tqdm.write(f"warning: {msg}", file=sys.stderr)
             rec = {k: r[k] for k in ("id", "source", "licence", "fps", "frames", "seconds", "texts", "split", "file",
@@ -342,7 +334,7 @@ def prepare(cfg: PrepareConfig) -> dict:
                 "hours_with_mirrors": round((s.frames + s.frames_mirrors) / 20.0 / 3600.0, 4),
                 "skipped_files": s.skipped,
                 "duplicate_clips": s.duplicates,
-                "body_height_m_median": round(float(np.median(s.heights)), 3) if s.heights else None,
+                "stature_m_median": round(float(np.median(s.heights)), 3) if s.heights else None,
             }
             for k, s in stats.items()
         },
@@ -378,12 +370,12 @@ def _prepare_out_dir(out: Path, overwrite: bool) -> None:
 
 def format_summary(summary: dict) -> str:
     """Human-readable table of a summary dict."""
-    lines = [f"{'source':<11} {'clips':>7} {'mirrors':>8} {'hours':>8} {'skipped':>8} {'dupes':>6} {'height m':>9}"]
+    lines = [f"{'source':<11} {'clips':>7} {'mirrors':>8} {'hours':>8} {'skipped':>8} {'dupes':>6} {'stature m':>10}"]
     for k, s in summary["sources"].items():
-        h = s["body_height_m_median"]
+        h = s["stature_m_median"]
         lines.append(
             f"{k:<11} {s['clips']:>7} {s['mirrored_clips']:>8} {s['hours']:>8.3f} {s['skipped_files']:>8} "
-            f"{s['duplicate_clips']:>6} {('%.2f' % h) if h else '-':>9}"
+            f"{s['duplicate_clips']:>6} {('%.2f' % h) if h else '-':>10}"
         )
     lines.append(
         f"{'total':<11} {summary['total_clips']:>7} {summary['total_clips_with_mirrors'] - summary['total_clips']:>8} "
