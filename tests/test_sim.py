@@ -296,3 +296,17 @@ def test_report_json_and_plots_are_written(tiny, tmp_path):
         assert png.stat().st_size > 10_000 and png.read_bytes()[:4] == b"\x89PNG"
     assert len(on_disk["outputs"]["plots"]) == 4
     assert result.report["metrics"] == on_disk["metrics"] or on_disk["metrics"]["passed"] is False
+
+
+def test_skating_outside_planned_contacts_is_diagnosed_as_low_clearance(tiny):
+    qpos = S.sliding_foot(tiny, 2.0, FPS, side=1)
+    planned = np.ones((len(qpos), 2), dtype=bool)
+    trajectory = RobotTrajectory(qpos, FPS, tiny.joint_names, tiny.name, contacts=planned, source="slide.npz")
+    details = validate_trajectory(trajectory, tiny, physics=False).report["checks"]["foot_skate_ratio"]["details"]
+    assert details["skate_frames_in_planned_contact"][1] > 0 and "diagnosis" not in details
+    planned[:, 1] = False  # retargeting said the right foot was swinging: it skims the floor
+    trajectory.contacts = planned
+    result = validate_trajectory(trajectory, tiny, physics=False)
+    details = result.report["checks"]["foot_skate_ratio"]["details"]
+    assert details["skate_frames_outside_planned_contact"][1] > 0
+    assert "clearance" in details["diagnosis"] and "clearance" in result.summary()

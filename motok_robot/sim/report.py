@@ -122,19 +122,33 @@ def _frames(mask: np.ndarray) -> list[int]:
 
 
 def build_checks(index: RobotIndex, kin: KinematicResult, roll: RolloutResult | None,
-                 config: ValidationConfig) -> tuple[list[Check], dict, dict, dict]:
-    """All checks, the metrics dict, the per-foot and the per-joint summaries."""
+                 config: ValidationConfig, planned_contacts: np.ndarray | None = None
+                 ) -> tuple[list[Check], dict, dict, dict]:
+    """All checks, the metrics dict, the per-foot and the per-joint summaries.
+
+    ``planned_contacts`` (bool [T, 2], the ``contacts`` field of robot.npz) only adds a
+    diagnosis to the skating details: skating inside planned contact phases (the foot slides)
+    versus outside them (the swing foot skims the floor: too little clearance).
+    """
     c = config
     checks: list[Check] = []
     contact_frames = kin.contact.sum(axis=0)
     skate_ratio = np.where(contact_frames > 0, kin.skating.sum(axis=0) / np.maximum(contact_frames, 1), 0.0)
     worst_ratio_foot = int(np.argmax(skate_ratio))
     worst_dist_foot = int(np.argmax(kin.skate_distance))
+    skate_details = {"foot": SIDES[worst_ratio_foot]}
+    if planned_contacts is not None and planned_contacts.shape == kin.skating.shape:
+        inside = kin.skating & planned_contacts
+        outside_plan = kin.skating & ~planned_contacts
+        skate_details.update(skate_frames_in_planned_contact=inside.sum(axis=0).tolist(),
+                             skate_frames_outside_planned_contact=outside_plan.sum(axis=0).tolist())
+        if outside_plan.sum() > inside.sum():
+            skate_details["diagnosis"] = ("most skating frames are planned swing frames: the swing foot moves within "
+                                          f"{config.contact_height_m} m of the floor (too little foot clearance)")
     checks.append(_upper(
         "foot_skate_ratio", float(skate_ratio.max()), c.max_foot_skate_ratio, "ratio",
         f"fraction of a foot's contact frames (sole < {c.contact_height_m} m) moving faster than "
-        f"{c.skate_speed_mps} m/s horizontally", _frames(kin.skating.any(axis=1)),
-        {"foot": SIDES[worst_ratio_foot]}))
+        f"{c.skate_speed_mps} m/s horizontally", _frames(kin.skating.any(axis=1)), skate_details))
     checks.append(_upper(
         "foot_skate_distance", float(kin.skate_distance.max()), c.max_foot_skate_distance_m, "m",
         "horizontal distance a foot travels while in contact, summed over the clip",
@@ -312,7 +326,9 @@ def summary_text(report: dict) -> str:
     for key in failed:
         ch = checks[key]
         extra = ""
-        if ch["details"].get("worst_joint"):
+        if ch["details"].get("diagnosis"):
+            extra = f", {ch['details']['foot']} foot: {ch['details']['diagnosis']}"
+        elif ch["details"].get("worst_joint"):
             extra = f", joint {ch['details']['worst_joint']}"
         elif ch["details"].get("foot"):
             extra = f", {ch['details']['foot']} foot"

@@ -59,7 +59,7 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
         start = time.perf_counter()
         roll = simulate(index, trajectory.qpos, trajectory.fps, config)
         timing["physics"] = time.perf_counter() - start
-    checks, metrics, per_foot, per_joint = build_checks(index, kin, roll, config)
+    checks, metrics, per_foot, per_joint = build_checks(index, kin, roll, config, trajectory.contacts)
     report = {
         "schema": SCHEMA, "version": __version__, "passed": metrics["passed"],
         "failed_checks": [c.name for c in checks if not c.passed], "robot": index.name,
