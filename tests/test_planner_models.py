@@ -244,3 +244,12 @@ def test_top_k_top_p_filtering():
     p = logits.softmax(-1)[0]
     kept = torch.isfinite(filter_logits(logits, top_p=float(p[0]) + 1e-3)[0])
     assert kept.tolist() == [True, True, False, False, False]
+
+
+def test_action_labels_from_index_records():
+    from motok_robot.planner.data import clip_action
+
+    assert clip_action({"action": " wave "}) == "wave"
+    assert clip_action({"label": "kick", "source": "bandai"}) == "kick"
+    assert clip_action({"source": "bandai", "file": "/d/dataset-2_wave-right-hand_active_003.bvh"}) == "wave-right-hand"
+    assert clip_action({"source": "cmu", "file": "/d/01_01.amc"}) is None

@@ -119,12 +119,23 @@ def embed_texts(texts: list[str], encoder, cache_dir: Path, batch: int = 256) ->
     return torch.stack([known[t] for t in texts])
 
 
+_BANDAI_NAME = re.compile(r"dataset-[12]_(?P<content>[a-z-]+)_[a-z-]+_\d+", re.IGNORECASE)
+
+
 def clip_action(record: dict) -> str | None:
-    """The action label of an index record (field ``action`` or ``label``), if any."""
+    """The action label of an index record, if any.
+
+    The record's ``action`` or ``label`` field; for Bandai Namco clips without one, the content
+    label of the file name (``dataset-1_{content}_{style}_{NNN}.bvh``, e.g. ``walk-left``).
+    """
     for key in ("action", "label"):
         value = record.get(key)
         if isinstance(value, str) and value.strip():
             return value.strip()
+    if record.get("source") == "bandai":
+        match = _BANDAI_NAME.search(Path(str(record.get("file", ""))).name)
+        if match:
+            return match.group("content").lower()
     return None
 
 

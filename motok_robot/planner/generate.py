@@ -153,7 +153,7 @@ class MotionGenerator:
         self.kind = cfg.kind
         self.model_id = (f"tokenizer={tok_path.name}@{tok_hash[:12]};"
                          f"planner={cfg.kind}:{plan_path.name}@{file_digest(plan_path / 'model.safetensors')[:12]};"
-                         f"text={self.text_encoder.name.split('/')[-1]}")
+                         f"text={self.text_encoder.name}")
 
     @property
     def max_seconds(self) -> float:
