@@ -9,7 +9,9 @@ bus call, so with :class:`~motok_robot.servo.timing.RealClock` the robot moves i
 with :class:`~motok_robot.servo.timing.FakeClock` it moves in the streamer's time.  The robot
 starts free-standing at ``robot.nominal_qpos()``.
 
-``render_path`` (MP4/GIF) records frames from the model's ``track`` camera at ``render_fps``.
+``render_path`` (MP4/GIF): the state is sampled at ``render_fps`` while playing and the frames
+are drawn from the model's ``track`` camera when the rig is closed (rendering stays off the
+real-time path).
 :attr:`SimRig.fell` tells whether the base (pelvis) dropped below ``fall_fraction`` of its
 start height at any time; :attr:`min_base_height` is the lowest base height (m).
 """
@@ -79,13 +81,10 @@ class SimRig(ServoBus):
         self.steps = 0
         self.render_path = Path(render_path) if render_path is not None else None
         self.render_fps = render_fps
-        self.frames: list[np.ndarray] = []
-        self._renderer = None
+        self.snapshots: list[np.ndarray] = []  # qpos [nq] sampled at render_fps
+        self._size = (height, width)
         self._camera = camera
         if self.render_path is not None:
-            self._renderer = mujoco.Renderer(self.model, height=height, width=width)
-            cam = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
-            self._camera = cam if cam >= 0 else -1
             self._capture()
         self.closed = False
 
@@ -95,8 +94,7 @@ class SimRig(ServoBus):
         return self.min_base_height < self.fall_fraction * self.start_base_height
 
     def _capture(self) -> None:
-        self._renderer.update_scene(self.data, camera=self._camera)
-        self.frames.append(self._renderer.render().copy())
+        self.snapshots.append(self.data.qpos.copy())
 
     def advance(self) -> None:
         """Step physics up to the clock's time (at most ``max_lag_s`` behind: no runaway catch-up)."""
@@ -111,7 +109,7 @@ class SimRig(ServoBus):
             self._mj.mj_step(self.model, self.data)
             self.steps += 1
             self.min_base_height = min(self.min_base_height, float(self.data.qpos[2]))
-            if self._renderer is not None and self.data.time >= len(self.frames) / self.render_fps:
+            if self.render_path is not None and self.data.time >= len(self.snapshots) / self.render_fps:
                 self._capture()
 
     def joint_angles(self, ids: Sequence[int]) -> np.ndarray:
@@ -177,10 +175,25 @@ class SimRig(ServoBus):
         if self.closed:
             return
         self.closed = True
-        if self._renderer is not None:
-            import imageio.v2 as imageio
+        if self.render_path is not None and self.snapshots:
+            self.render(self.render_path)
 
-            self.render_path.parent.mkdir(parents=True, exist_ok=True)
-            imageio.mimwrite(self.render_path, self.frames, fps=self.render_fps)
-            self._renderer.close()
-            self._renderer = None
+    def render(self, path: str | Path) -> Path:
+        """Draw the sampled states to a video (MP4/GIF) at ``render_fps``; returns its path."""
+        import imageio.v2 as imageio
+        from tqdm import tqdm
+
+        mujoco = self._mj
+        height, width = self._size
+        cam = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_CAMERA, self._camera)
+        data = mujoco.MjData(self.model)
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with mujoco.Renderer(self.model, height=height, width=width) as renderer, \
+                imageio.get_writer(path, fps=self.render_fps) as writer:
+            for qpos in tqdm(self.snapshots, desc="rendering", unit="frame", disable=None):
+                data.qpos[:] = qpos
+                mujoco.mj_forward(self.model, data)
+                renderer.update_scene(data, camera=cam if cam >= 0 else -1)
+                writer.append_data(renderer.render())
+        return path

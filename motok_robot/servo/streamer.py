@@ -465,6 +465,9 @@ class Streamer:
             if non_finite:
                 warnings.warn(f"{non_finite} non-finite servo targets were replaced by the last safe command",
                               PlaybackWarning, stacklevel=2)
+            if limited:
+                warnings.warn(f"{limited} servo targets were clamped to the position limits or the per-tick step "
+                              "limit (commanded positions are in the log)", PlaybackWarning, stacklevel=2)
             return result
 
         action = self._safe_stop(previous, last_present, log, clock.now() - t0, done)
