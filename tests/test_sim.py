@@ -295,6 +295,9 @@ def test_report_json_and_plots_are_written(tiny, tmp_path):
         png = tmp_path / "out" / f"{name}.png"
         assert png.stat().st_size > 10_000 and png.read_bytes()[:4] == b"\x89PNG"
     assert len(on_disk["outputs"]["plots"]) == 4
+    import hashlib
+
+    assert on_disk["input"]["sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
     assert result.report["metrics"] == on_disk["metrics"] or on_disk["metrics"]["passed"] is False
 
 

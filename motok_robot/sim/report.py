@@ -8,7 +8,8 @@ Schema (``"schema": "motok-robot/validation-report/1"``)::
       "passed":  bool,                       # every check passed
       "failed_checks": [str, ...],           # names of the failing checks, in check order
       "robot":   str,                        # robot name
-      "input":   {"path": str, "frames": int, "fps": float, "duration_s": float},
+      "input":   {"path": str, "frames": int, "fps": float, "duration_s": float,
+                  "sha256": str|null},           # digest of the validated robot.npz file
       "physics": bool,                       # whether the physics rollout ran
       "metrics": {                           # one number per question (null when not measured)
         "foot_skate_ratio": float,           # worst foot: skating frames / contact frames

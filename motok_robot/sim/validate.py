@@ -40,11 +40,12 @@ class ValidationResult:
 
 def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationConfig | None = None,
                         out_dir: str | Path | None = None, physics: bool = True, plots: bool = True,
-                        render: bool = False) -> ValidationResult:
+                        render: bool = False, input_sha256: str | None = None) -> ValidationResult:
     """Validate ``trajectory`` on ``robot`` (a ``Robot`` or a prebuilt :class:`RobotIndex`).
 
     With ``out_dir``, writes ``report.json``, the PNG plots (``plots``) and ``validation.mp4``
-    (``render``) there.  Raises :class:`~motok_robot.errors.InputError` when the trajectory does
+    (``render``) there.  ``input_sha256`` (the file's digest) is recorded in ``input`` so a
+    later stage can check that the file it plays is the one validated.  Raises :class:`~motok_robot.errors.InputError` when the trajectory does
     not fit the robot.
     """
     config = config or ValidationConfig()
@@ -64,7 +65,7 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
         "schema": SCHEMA, "version": __version__, "passed": metrics["passed"],
         "failed_checks": [c.name for c in checks if not c.passed], "robot": index.name,
         "input": {"path": trajectory.source, "frames": trajectory.num_frames, "fps": trajectory.fps,
-                  "duration_s": trajectory.duration_s},
+                  "duration_s": trajectory.duration_s, "sha256": input_sha256},
         "physics": physics, "metrics": metrics, "checks": {c.name: c.to_dict() for c in checks},
         "per_foot": per_foot, "per_joint": per_joint, "config": config.to_dict(), "timing_s": timing,
         "outputs": {"report": None, "plots": [], "video": None},
@@ -93,9 +94,12 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
 def validate_file(path: str | Path, robot, config: ValidationConfig | None = None, out_dir: str | Path | None = None,
                   physics: bool = True, plots: bool = True, render: bool = False) -> ValidationResult:
     """Read ``path`` (robot.npz), check it fits ``robot`` and validate it (see :func:`validate_trajectory`)."""
+    import hashlib
+
     index = robot if isinstance(robot, RobotIndex) else index_robot(robot)
     trajectory = load_robot_npz(path, _RobotView(index))
-    return validate_trajectory(trajectory, index, config, out_dir, physics, plots, render)
+    digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    return validate_trajectory(trajectory, index, config, out_dir, physics, plots, render, input_sha256=digest)
 
 
 class _RobotView:
