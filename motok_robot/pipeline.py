@@ -1,0 +1,850 @@
+"""One sentence -> human motion -> robot trajectory -> MuJoCo validation -> servo playback.
+
+The Python API behind ``motok-robot run``::
+
+    from motok_robot import Pipeline
+
+    pipe = Pipeline()                                   # models are loaded once, on first use
+    result = pipe.run("a person waves the right hand", robot="op3_like", seconds=6, out_dir="wave/")
+    result.passed, result.failed_checks                 # the validation verdict
+    result.files["video"], result.timings["retarget"]   # paths and per-stage seconds
+
+Stages and the files they write into ``out_dir`` (file formats: docs/CONTRACTS.md):
+
+=============  ===============================================================================
+generate       ``motion.npz`` (human joints [T, 22, 3] m z-up, features, tokens)
+retarget       ``robot.npz`` (qpos [T, nq] in MuJoCo order, contacts, keypoint errors)
+validate       ``report.json`` (pass/fail checks), ``plots``: ``balance_topview.png``,
+               ``feet.png``, ``joints.png``, ``torques.png``; ``render``: ``video.mp4``
+playback       ``playback.csv`` (one row per control tick) and ``playback.stats.json``;
+               with ``playback="sim"`` and ``render``: ``playback_sim.mp4``
+(always)       ``summary.md`` linking every file with the verdict and per-stage times,
+               ``pipeline.json`` (the same, machine-readable)
+=============  ===============================================================================
+
+Playback modes: ``"dry-run"`` (default) streams to an emulated Dynamixel chain (the same
+streamer, pre-flight, limiter and log as hardware) in simulated time; ``"sim"`` streams to the
+MuJoCo model (:class:`~motok_robot.servo.sim_rig.SimRig`) in simulated time; ``"port"`` streams
+to real servos on ``port`` in real time and only when the validation report passed (or with
+``force=True``).  A failed validation is not an error: every file is still written, the
+verdict says FAIL, and hardware playback is refused.
+
+Output is atomic: the stages write into a hidden folder ``.OUT.partial-*`` next to ``out_dir``,
+renamed to ``out_dir`` only when every stage finished.  If a stage raises (or Ctrl-C), the
+partial folder is renamed ``OUT.failed/`` with ``FAILED.txt`` naming the stage and the error,
+and ``out_dir`` is not created.  Invalid input (empty or too long text, unknown robot,
+non-positive seconds, a negative seed, an output folder that cannot be written, a missing
+serial port) raises :class:`~motok_robot.errors.InputError` before any work and leaves nothing.
+
+This module does not import torch, MuJoCo or matplotlib at import time.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import re
+import shutil
+import tempfile
+import time
+import uuid
+import warnings
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from motok_robot.errors import HardwareError, InputError, MotokError
+
+#: Longest prompt accepted, characters (equals ``motok_robot.text.MAX_TEXT_CHARS``; kept here so
+#: that input is checked without importing torch - a test keeps the two equal).
+MAX_TEXT_CHARS = 500
+PLAYBACK_MODES = ("dry-run", "sim", "port")
+#: Clip length used with constraints when no ``seconds`` is given (the planner's no-text default).
+DEFAULT_CONSTRAINED_SECONDS = 6.0
+#: Stages timed in :attr:`PipelineResult.timings`, in order.
+STAGES = ("generate", "retarget", "validate", "plots", "render", "playback")
+PLOT_FILES = ("balance_topview.png", "feet.png", "joints.png", "torques.png")
+
+
+# ----------------------------------------------------------------------------- configuration
+@dataclass
+class PipelineConfig:
+    """Settings of a :class:`Pipeline` (every default in one place).
+
+    Attributes:
+        planner: ``"masked"`` (default) or ``"ar"``.
+        tokenizer_run, planner_run: run directories (None: ``models/tokenizer``,
+            ``models/planner_<planner>``, see :mod:`motok_robot.planner.generate`).
+        device: torch device of generation.
+        generation: extra keyword arguments of ``MotionGenerator.generate`` (``cfg_scale``,
+            ``steps``, ``decoder_steps``, ``temperature``, ``top_k``, ``top_p``).
+        retarget: a :class:`retarget.config.RetargetConfig` (None: its defaults).
+        validation: a :class:`motok_robot.sim.config.ValidationConfig` (None: its defaults).
+        playback: a :class:`motok_robot.servo.config.PlaybackConfig` (None: the robot's bus
+            rate and the defaults).
+        plots: write the validation PNG plots.
+        realtime: play dry-run and sim playback at the wall-clock rate (default: simulated time,
+            which takes a fraction of a second; hardware always runs in real time).
+    """
+
+    planner: str = "masked"
+    tokenizer_run: str | Path | None = None
+    planner_run: str | Path | None = None
+    device: str = "cpu"
+    generation: dict = field(default_factory=dict)
+    retarget: object | None = None
+    validation: object | None = None
+    playback: object | None = None
+    plots: bool = True
+    realtime: bool = False
+
+
+@dataclass
+class PlaybackSummary:
+    """What the playback stage did.
+
+    ``mode``: dry-run / sim / port; ``status``: ``completed``, ``refused`` (hardware without a
+    passing report), ``skipped`` (robot without servos), ``stopped`` (a servo fault or a fall)
+    or ``error``; ``gate``: None when the validation report allows hardware playback, else why
+    not; ``line``: the streamer's one-line result; ``fell``: sim only.
+    """
+
+    mode: str
+    status: str
+    gate: str | None = None
+    line: str = ""
+    error: str | None = None
+    fell: bool | None = None
+    forced: bool = False
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "completed" and not self.fell
+
+
+@dataclass
+class PipelineResult:
+    """One finished run.
+
+    Attributes:
+        out_dir: the output folder.
+        text, robot, seconds (of the generated clip), seed: what was run.
+        files: ``{name: Path}`` of every file written (``motion``, ``robot``, ``report``,
+            ``plot_<name>``, ``video``, ``playback_log``, ``playback_stats``, ``playback_video``,
+            ``summary``, ``result``).
+        passed: the validation verdict (``report.json`` ``passed``).
+        failed_checks: names of the failing validation checks.
+        timings: seconds per stage (:data:`STAGES`, plus ``load`` when models were loaded
+            during this run, and ``total``).
+        playback: :class:`PlaybackSummary`.
+        report: the validation report (dict).
+        model: identifiers of the generation models.
+        notes: warnings worth reading (failed solver windows, forced playback ...).
+    """
+
+    out_dir: Path
+    text: str
+    robot: str
+    seconds: float
+    seed: int
+    files: dict[str, Path]
+    passed: bool
+    failed_checks: list[str]
+    timings: dict[str, float]
+    playback: PlaybackSummary
+    report: dict
+    model: str = ""
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """Validation passed and playback completed."""
+        return self.passed and self.playback.ok
+
+    def line(self) -> str:
+        """A one-line verdict."""
+        verdict = "PASS" if self.passed else "FAIL"
+        return f'{verdict} "{self.text}" on {self.robot} ({self.seconds:.1f} s, seed {self.seed}) -> {self.out_dir}'
+
+    def to_dict(self) -> dict:
+        return {
+            "out_dir": str(self.out_dir), "text": self.text, "robot": self.robot, "seconds": self.seconds,
+            "seed": self.seed, "passed": self.passed, "failed_checks": list(self.failed_checks),
+            "files": {k: _rel(v, self.out_dir) for k, v in self.files.items()},
+            "timings_s": {k: round(v, 4) for k, v in self.timings.items()},
+            "playback": asdict(self.playback), "model": self.model, "notes": list(self.notes),
+        }
+
+
+@dataclass
+class PromptSpec:
+    """One row of a ``--prompts`` file: the text, its seconds (None: estimated) and seed."""
+
+    text: str
+    seconds: float | None = None
+    seed: int = 0
+    line: int = 0
+
+
+# ----------------------------------------------------------------------------- input checks
+def check_text(text) -> str:
+    """The prompt with whitespace collapsed; InputError when empty or too long."""
+    if not isinstance(text, str):
+        raise InputError(f"text must be a string, got {type(text).__name__}")
+    clean = " ".join(text.split())
+    if not clean:
+        raise InputError('text is empty: give a sentence such as "a person walks forward"')
+    if len(clean) > MAX_TEXT_CHARS:
+        raise InputError(f"text is {len(clean)} characters long; at most {MAX_TEXT_CHARS} are accepted")
+    return clean
+
+
+def check_seconds(seconds, where: str = "seconds") -> float | None:
+    if seconds is None:
+        return None
+    if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not math.isfinite(seconds):
+        raise InputError(f"{where} must be a number, got {seconds!r}")
+    if seconds <= 0:
+        raise InputError(f"{where} must be positive, got {seconds:g}")
+    return float(seconds)
+
+
+def check_seed(seed, where: str = "seed") -> int:
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        try:
+            import numpy as np
+
+            if isinstance(seed, np.integer) and seed >= 0:
+                return int(seed)
+        except ImportError:  # pragma: no cover
+            pass
+        raise InputError(f"{where} must be a non-negative integer, got {seed!r}")
+    return int(seed)
+
+
+def check_robot(robot) -> str:
+    """The robot name or path, when :func:`motok_robot.robots.load` can find it (no MuJoCo)."""
+    from motok_robot.robots import list_robots, models_dir
+
+    if not isinstance(robot, (str, os.PathLike)) or not str(robot).strip():
+        raise InputError(f"robot must be a robot name, got {robot!r}")
+    text = str(robot)
+    p = Path(text).expanduser()
+    if p.suffix in (".toml", ".xml") or os.sep in text:
+        if not p.with_suffix(".toml").is_file():
+            raise InputError(f"robot description not found: {p.with_suffix('.toml')} (a robot is NAME.xml + NAME.toml)")
+        return text
+    known = list_robots()
+    if text not in known:
+        raise InputError(f"unknown robot {text!r}; known robots: {', '.join(known) or 'none'} (in {models_dir()})")
+    return text
+
+
+def check_out_dir(out_dir, overwrite: bool = False) -> Path:
+    """``out_dir`` as a Path when it can be written (probed by creating a folder next to it).
+
+    Raises InputError when it is a file, a non-empty folder (unless ``overwrite``), or when its
+    nearest existing parent is not a writable folder.  Creates nothing that stays.
+    """
+    if out_dir is None or not str(out_dir).strip():
+        raise InputError("an output folder is required (--out DIR)")
+    out = Path(out_dir).expanduser().absolute()
+    if out.exists():
+        if not out.is_dir():
+            raise InputError(f"output folder {out} is an existing file")
+        if any(out.iterdir()) and not overwrite:
+            raise InputError(f"output folder {out} exists and is not empty; choose a new folder or pass --overwrite")
+    ancestor = out.parent
+    while not ancestor.exists():
+        if ancestor == ancestor.parent:
+            break
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise InputError(f"output folder {out} cannot be created: {ancestor} is not a folder")
+    try:
+        probe = tempfile.mkdtemp(prefix=".motok-probe-", dir=ancestor)
+        os.rmdir(probe)
+    except OSError as exc:
+        raise InputError(f"output folder {out} cannot be written: {ancestor}: {exc.strerror or exc}") from None
+    return out
+
+
+def check_playback(playback: str, port: str | None) -> None:
+    if playback not in PLAYBACK_MODES:
+        raise InputError(f"playback must be one of {', '.join(PLAYBACK_MODES)}, got {playback!r}")
+    if playback == "port":
+        if not port:
+            raise InputError("hardware playback needs a serial port (--port DEV)")
+        if not os.path.exists(port) and not str(port).upper().startswith("COM"):
+            raise InputError(f"serial port {port} does not exist (is the USB adapter plugged in?)")
+    elif port:
+        raise InputError(f"a serial port ({port}) was given with playback {playback!r}; use playback='port'")
+
+
+def read_prompts(path) -> list[PromptSpec]:
+    """Prompts of a ``--prompts`` file.
+
+    Either one prompt per line (blank lines and lines starting with ``#`` are skipped), or a CSV
+    file whose header row names the columns ``text`` and optionally ``seconds`` and ``seed``
+    (empty cells: estimated length / seed 0).  Every row is checked; errors name the line.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"--prompts {path}: file not found")
+    try:
+        content = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"--prompts {path}: cannot read ({exc})") from None
+    lines = content.splitlines()
+    numbered = [(i + 1, ln) for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")]
+    if not numbered:
+        raise InputError(f"--prompts {path}: no prompts (one per line, or CSV with a text,seconds,seed header)")
+    first = next(csv.reader([numbered[0][1]]))
+    header = [c.strip().lower() for c in first]
+    specs: list[PromptSpec] = []
+    if "text" in header and set(header) <= {"text", "seconds", "seed"}:
+        for number, ln in numbered[1:]:
+            cells = next(csv.reader([ln]))
+            if len(cells) > len(header):
+                raise InputError(f"--prompts {path}: line {number}: {len(cells)} columns, the header has {len(header)}")
+            row = dict(zip(header, (c.strip() for c in cells)))
+            where = f"--prompts {path}: line {number}"
+            try:
+                text = check_text(row.get("text", ""))
+            except InputError as exc:
+                raise InputError(f"{where}: {exc}") from None
+            seconds = _parse_number(row.get("seconds", ""), float, f"{where}: seconds")
+            seed = _parse_number(row.get("seed", ""), int, f"{where}: seed")
+            specs.append(PromptSpec(text, check_seconds(seconds, f"{where}: seconds"),
+                                    0 if seed is None else check_seed(seed, f"{where}: seed"), number))
+        if not specs:
+            raise InputError(f"--prompts {path}: the CSV has a header but no rows")
+    else:
+        for number, ln in numbered:
+            try:
+                specs.append(PromptSpec(check_text(ln), None, 0, number))
+            except InputError as exc:
+                raise InputError(f"--prompts {path}: line {number}: {exc}") from None
+    return specs
+
+
+def _parse_number(cell: str, kind, where: str):
+    if cell is None or cell == "":
+        return None
+    try:
+        return kind(cell)
+    except ValueError:
+        raise InputError(f"{where}: {cell!r} is not {'an integer' if kind is int else 'a number'}") from None
+
+
+def slug(text: str, limit: int = 40) -> str:
+    """A folder-name-safe short form of ``text``."""
+    return re.sub(r"[^a-z0-9]+", "_", text.lower()).strip("_")[:limit].rstrip("_") or "prompt"
+
+
+def _rel(path: Path | str, root: Path) -> str:
+    try:
+        return Path(path).relative_to(root).as_posix()
+    except ValueError:
+        return str(path)
+
+
+# ----------------------------------------------------------------------------- the pipeline
+_ROBOT_STAGES: dict[tuple[str, str], dict] = {}
+
+
+def load_robot_stages(name: str, retarget_config=None) -> dict:
+    """``{"robot", "retargeter", "index"}`` for robot ``name``: the :class:`~motok_robot.robots.Robot`,
+    its :class:`~retarget.solve.Retargeter` (compiled window problems are kept in it) and its
+    validation :class:`~motok_robot.sim.model_index.RobotIndex`; reused per process for the same
+    robot file and retargeting settings."""
+    from motok_robot.robots import load
+    from motok_robot.sim.model_index import index_robot
+    from retarget.config import RetargetConfig
+    from retarget.robot_model import RetargetRobot
+    from retarget.solve import Retargeter
+
+    retarget_config = retarget_config or RetargetConfig()
+    robot = load(name)
+    key = (str(robot.mjcf_path), repr(retarget_config))
+    if key not in _ROBOT_STAGES:
+        _ROBOT_STAGES[key] = {"robot": robot, "retargeter": Retargeter(RetargetRobot.from_robot(robot), retarget_config),
+                              "index": index_robot(robot)}
+    return _ROBOT_STAGES[key]
+
+
+class Pipeline:
+    """Loaded models and robots; :meth:`run` turns sentences into validated robot trajectories.
+
+    Args:
+        config: :class:`PipelineConfig`; keyword arguments override its fields
+            (``Pipeline(planner_run="runs/masked", tokenizer_run="runs/tok", plots=False)``).
+
+    The generation models are loaded on the first :meth:`run` (and reused, also by
+    :func:`motok_robot.generate` in the same process); robots, their compiled retargeting
+    problems and validation indices are cached per robot.
+    """
+
+    def __init__(self, config: PipelineConfig | None = None, **overrides) -> None:
+        config = config or PipelineConfig()
+        unknown = set(overrides) - set(PipelineConfig.__dataclass_fields__)
+        if unknown:
+            raise TypeError(f"unknown Pipeline option(s): {', '.join(sorted(unknown))}")
+        for key, value in overrides.items():
+            setattr(config, key, value)
+        if config.planner not in ("masked", "ar"):
+            raise InputError(f"planner must be 'masked' or 'ar', got {config.planner!r}")
+        self.config = config
+        self._generator = None
+        self._robots: dict[str, dict] = {}
+
+    # ------------------------------------------------------------------ loading
+    @property
+    def generator(self):
+        """The loaded :class:`~motok_robot.planner.generate.MotionGenerator` (loads on first use)."""
+        if self._generator is None:
+            from motok_robot.planner.generate import load_generator
+
+            cfg = self.config
+            self._generator = load_generator(cfg.planner, cfg.tokenizer_run, cfg.planner_run, cfg.device)
+        return self._generator
+
+    def load_models(self) -> float:
+        """Load the generation models now; returns the seconds it took (0 when already loaded)."""
+        if self._generator is not None:
+            return 0.0
+        start = time.perf_counter()
+        _ = self.generator
+        return time.perf_counter() - start
+
+    def robot(self, name: str) -> dict:
+        """Cached ``{"robot", "retargeter", "index"}`` for ``name`` (loaded and compiled once per process)."""
+        if name not in self._robots:
+            self._robots[name] = load_robot_stages(name, self.config.retarget)
+        return self._robots[name]
+
+    # ------------------------------------------------------------------ one run
+    def check(self, text, robot="op3_like", seconds=None, seed=0, constraints=None, out_dir=None,
+              playback="dry-run", port=None, overwrite=False) -> dict:
+        """Check a request without doing any work (no models loaded, nothing written).
+
+        Returns the cleaned arguments; raises :class:`InputError` with a one-line message.
+        """
+        clean_text = check_text(text)
+        seconds = check_seconds(seconds)
+        seed = check_seed(seed)
+        robot = check_robot(robot)
+        check_playback(playback, port)
+        if constraints is not None:
+            frames = getattr(constraints, "frames", None)
+            if not isinstance(frames, int) or frames < 1:
+                raise InputError("constraints must be a motok_robot.control.constraints.Constraints")
+            if seconds is None:
+                seconds = frames / 20.0
+            elif round(seconds * 20) != frames:
+                raise InputError(f"constraints are laid on {frames} frames, but seconds={seconds:g} gives "
+                                 f"{round(seconds * 20)} frames at 20 fps")
+        out = check_out_dir(out_dir, overwrite)
+        return dict(text=clean_text, robot=robot, seconds=seconds, seed=seed, out_dir=out)
+
+    def run(self, text: str, robot: str = "op3_like", seconds: float | None = None, seed: int = 0,
+            constraints=None, out_dir: str | Path = "motok_out", playback: str = "dry-run",
+            port: str | None = None, force: bool = False, render: bool = True, *, control=None,
+            control_path: str = "both", overwrite: bool = False, plots: bool | None = None,
+            progress: bool | None = False) -> PipelineResult:
+        """Generate, retarget, validate and play one sentence; write every file to ``out_dir``.
+
+        Args:
+            text: the prompt (at most 500 characters).
+            robot: robot name (``motok-robot robots list``) or ``NAME.toml`` path.
+            seconds: clip length (None: estimated from the text; 6 s with constraints).
+            seed: seeds generation (same seed, same motion).
+            constraints: a :class:`motok_robot.control.constraints.Constraints` (None: free).
+            out_dir: output folder (must not exist, or be empty, unless ``overwrite``).
+            playback: ``"dry-run"`` (emulated servo chain), ``"sim"`` (MuJoCo) or ``"port"``.
+            port: serial device for ``playback="port"``.
+            force: play on hardware even when validation failed.
+            render: write ``video.mp4`` (and ``playback_sim.mp4`` with ``playback="sim"``).
+            control: :class:`motok_robot.control.config.ControlConfig` for constrained generation.
+            control_path: ``"both"``, ``"planner"`` or ``"decoder"`` (constrained generation).
+            overwrite: replace a non-empty ``out_dir`` (only once the new run has finished).
+            plots: write the validation plots (None: ``config.plots``).
+            progress: show a stage progress bar (None: when stderr is a terminal).
+        Returns:
+            :class:`PipelineResult`.  Raises :class:`InputError` for invalid input (nothing written)
+            and :class:`MotokError` naming the stage when a stage fails (see the module docstring).
+        """
+        req = self.check(text, robot, seconds, seed, constraints, out_dir, playback, port, overwrite)
+        timings: dict[str, float] = {}
+        start_all = time.perf_counter()
+        load_s = self.load_models()
+        if load_s:
+            timings["load"] = load_s
+        if req["seconds"] is not None:
+            self.generator.frames_for(req["seconds"])  # InputError above the planner's maximum
+        t = time.perf_counter()
+        entry = self.robot(req["robot"])
+        if time.perf_counter() - t > 1e-3:
+            timings["setup"] = time.perf_counter() - t
+        out: Path = req["out_dir"]
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.parent / f".{out.name}.partial-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+        tmp.mkdir()
+        state = {"stage": "generate"}
+        bar = None
+        try:
+            from tqdm import tqdm
+
+            bar = tqdm(total=4, desc="generate", unit="stage", disable=None if progress is None else not progress,
+                       leave=False)
+            result = self._run_stages(req, entry, tmp, timings, bar, state, constraints, control, control_path,
+                                      playback, port, force, render, self.config.plots if plots is None else plots)
+        except BaseException as exc:  # noqa: BLE001 - every failure leaves OUT.failed, never a complete-looking OUT
+            self._fail(tmp, out, state["stage"], exc)
+            if isinstance(exc, MotokError):
+                raise type(exc)(f"{state['stage']} stage failed: {exc} (partial files in {out}.failed)") from exc
+            raise
+        finally:
+            if bar is not None:
+                bar.close()
+        timings["total"] = time.perf_counter() - start_all
+        result.timings = timings
+        self._write_summary(result, tmp)
+        self._finish(tmp, out)
+        result.out_dir = out
+        result.files = {k: out / _rel(v, tmp) for k, v in result.files.items()}
+        return result
+
+    def _run_stages(self, req, entry, tmp: Path, timings, bar, state, constraints, control, control_path,
+                    playback, port, force, render, plots) -> PipelineResult:
+        files: dict[str, Path] = {}
+        notes: list[str] = []
+
+        def stage(name: str) -> str:
+            state["stage"] = name
+            bar.set_description(name)
+            return name
+
+        # 1. generation -> motion.npz
+        stage("generate")
+        t = time.perf_counter()
+        motion = self._generate(req, constraints, control, control_path)
+        files["motion"] = motion.save(tmp / "motion.npz")
+        timings["generate"] = time.perf_counter() - t
+        bar.update()
+
+        # 2. retargeting -> robot.npz
+        stage("retarget")
+        from retarget.io import write_robot_npz
+
+        t = time.perf_counter()
+        entry["retargeter"].prepare(len(motion.joints))  # compiles the window problem once per length
+        setup = time.perf_counter() - t
+        if setup > 1e-3:
+            timings["setup"] = timings.get("setup", 0.0) + setup
+        t = time.perf_counter()
+
+        rt = entry["retargeter"].run(motion.joints, float(motion.fps), progress=False, source="motion.npz")
+        files["robot"] = write_robot_npz(tmp / "robot.npz", rt)
+        timings["retarget"] = time.perf_counter() - t
+        failed_windows = rt.failed_windows()
+        if failed_windows:
+            notes.append(f"retargeting: {len(failed_windows)}/{len(rt.windows)} solver windows did not converge "
+                         f"(first: frames {failed_windows[0].start}-{failed_windows[0].stop}, "
+                         f"{failed_windows[0].status})")
+        bar.update()
+
+        # 3. validation -> report.json, plots, video.mp4
+        stage("validate")
+        cfg = self.config
+        t = time.perf_counter()
+        from motok_robot.sim.report import write_report
+        from motok_robot.sim.trajectory import load_robot_npz
+        from motok_robot.sim.validate import validate_trajectory
+
+        trajectory = load_robot_npz(files["robot"], entry["robot"])
+        trajectory.source = "robot.npz"
+        validation = validate_trajectory(trajectory, entry["index"], cfg.validation, out_dir=None)
+        timings["validate"] = time.perf_counter() - t
+        report = validation.report
+        report["outputs"] = {"report": "report.json", "plots": [], "video": None}
+        if plots:
+            from motok_robot.sim.plots import save_plots
+
+            t = time.perf_counter()
+            for p in save_plots(validation, tmp):
+                files[f"plot_{Path(p).stem}"] = Path(p)
+                report["outputs"]["plots"].append(Path(p).name)
+            timings["plots"] = time.perf_counter() - t
+        if render:
+            from motok_robot.sim.render import render_video
+
+            t = time.perf_counter()
+            files["video"] = Path(render_video(validation, trajectory, tmp / "video.mp4", cfg.validation))
+            report["outputs"]["video"] = "video.mp4"
+            timings["render"] = time.perf_counter() - t
+        report.setdefault("timing_s", {}).update(
+            {k: timings[k] for k in ("plots", "render") if k in timings})
+        files["report"] = write_report(report, tmp / "report.json")
+        bar.update()
+
+        # 4. playback
+        stage("playback")
+        t = time.perf_counter()
+        pb = self._playback(entry["robot"], tmp, playback, port, force, render, files, notes)
+        timings["playback"] = time.perf_counter() - t
+        bar.update()
+
+        return PipelineResult(
+            out_dir=tmp, text=req["text"], robot=entry["robot"].name, seconds=float(motion.seconds),
+            seed=req["seed"], files=files, passed=bool(report["passed"]),
+            failed_checks=list(report["failed_checks"]), timings=timings, playback=pb, report=report,
+            model=motion.model, notes=notes)
+
+    def _generate(self, req, constraints, control, control_path):
+        """Generation, unconstrained (the planner) or constrained (the control stage)."""
+        opts = dict(self.config.generation)
+        if constraints is None:
+            return self.generator.generate(text=req["text"], seconds=req["seconds"], seed=req["seed"], **opts)
+        # Constrained generation: motok_robot.control.generate.generate_motion (issue 4).  It shares the
+        # per-process model cache with load_generator (same planner / run / device arguments).
+        try:
+            from motok_robot.control.generate import generate_motion
+        except ModuleNotFoundError as exc:
+            if exc.name in ("motok_robot.control.generate",):
+                raise InputError("constraints were given but constrained generation "
+                                 "(motok_robot.control.generate) is not available in this build") from None
+            raise
+        cfg = self.config
+        return generate_motion(req["text"], constraints=constraints, control=control, control_path=control_path,
+                               seconds=req["seconds"] or DEFAULT_CONSTRAINED_SECONDS, seed=req["seed"],
+                               planner=cfg.planner, tokenizer_run=cfg.tokenizer_run, planner_run=cfg.planner_run,
+                               device=cfg.device, **opts)
+
+    def _playback(self, robot, tmp: Path, mode: str, port, force: bool, render: bool, files, notes) -> PlaybackSummary:
+        from motok_robot.servo.bus import DynamixelBus
+        from motok_robot.servo.config import PlaybackConfig
+        from motok_robot.servo.convert import ServoMap
+        from motok_robot.servo.streamer import PlaybackWarning, Streamer, check_validation_report, load_trajectory
+        from motok_robot.servo.timing import FakeClock
+
+        gate = None
+        try:
+            check_validation_report(files["robot"], files["report"], force=False, robot_name=robot.name)
+        except InputError as exc:
+            gate = str(exc).split("refusing to play: ", 1)[-1].split(". Validate it first", 1)[0]
+        summary = PlaybackSummary(mode=mode, status="completed", gate=gate)
+        if not robot.servos:
+            summary.status = "skipped"
+            summary.line = f"robot {robot.name} has no servo map; nothing to play"
+            return summary
+        if mode == "port" and gate is not None:
+            if not force:
+                summary.status = "refused"
+                summary.line = f"hardware playback refused: {gate} (pass --force to play anyway)"
+                return summary
+            summary.forced = True
+            notes.append(f"hardware playback FORCED without a passing validation report ({gate})")
+            warnings.warn(f"playing on {port} WITHOUT a passing validation report ({gate}) because of --force",
+                          PlaybackWarning, stacklevel=3)
+        servo_map = ServoMap.from_specs(robot.servos)
+        trajectory = load_trajectory(files["robot"], servo_map, robot.name)
+        defaults = self.config.playback or PlaybackConfig()
+        rate = defaults.rate_hz
+        if self.config.playback is None and robot.bus is not None:
+            rate = robot.bus.control_hz
+        config = PlaybackConfig(**{**asdict(defaults), "rate_hz": rate})
+        baud = robot.bus.baud if robot.bus is not None else 2_000_000
+        simulated = mode != "port" and not self.config.realtime
+        clock = FakeClock() if simulated else None
+        log_path = tmp / "playback.csv"
+        rig = None
+        try:
+            if mode == "dry-run":
+                from motok_robot.servo.emulator import emulated_chain
+
+                chain = emulated_chain(servo_map, baud=baud, **({"clock": clock} if clock else {}))
+                bus = DynamixelBus(f"emulated:{robot.name}", baud, port_handler=chain)
+            elif mode == "sim":
+                from motok_robot.servo.sim_rig import SimRig
+
+                video = tmp / "playback_sim.mp4" if render else None
+                bus = rig = SimRig(robot, clock=clock, render_path=video)
+            else:
+                bus = DynamixelBus(port, baud)
+        except HardwareError as exc:
+            summary.status, summary.error = "error", str(exc)
+            return summary
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", PlaybackWarning)
+                streamer = Streamer(bus, servo_map, config, clock=clock, log_path=log_path)
+                streamer.preflight()
+                played = streamer.play(trajectory)
+            summary.line = played.line().replace(str(log_path), log_path.name)
+            notes.extend(f"playback: {w.message}" for w in caught if issubclass(w.category, PlaybackWarning))
+        except HardwareError as exc:  # the streamer already stopped safely and names the servo
+            summary.status, summary.error = "stopped", str(exc).replace(str(tmp) + os.sep, "")
+        finally:
+            bus.close()
+        for key, path in (("playback_log", log_path), ("playback_stats", log_path.with_name("playback.stats.json"))):
+            if path.is_file():
+                files[key] = path
+        if rig is not None:
+            summary.fell = bool(rig.fell)
+            summary.line += (f"; simulated robot {'FELL' if rig.fell else 'stayed upright'} "
+                             f"(lowest base height {rig.min_base_height:.3f} m)")
+            if render and (tmp / "playback_sim.mp4").is_file():
+                files["playback_video"] = tmp / "playback_sim.mp4"
+        if simulated:
+            summary.line += " [simulated time]"
+        return summary
+
+    # ------------------------------------------------------------------ output folder
+    @staticmethod
+    def _fail(tmp: Path, out: Path, stage: str, error: BaseException) -> None:
+        """Rename the partial folder ``OUT.failed`` and write ``FAILED.txt`` into it."""
+        failed = out.with_name(out.name + ".failed")
+        try:
+            (tmp / "FAILED.txt").write_text(
+                f"FAILED at stage {stage}: {type(error).__name__}: {error}\n"
+                "The files here are partial; the run did not finish.\n", encoding="utf-8")
+            if failed.exists():
+                shutil.rmtree(failed)
+            os.replace(tmp, failed)
+        except OSError:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+    @staticmethod
+    def _finish(tmp: Path, out: Path) -> None:
+        """Move the finished folder to ``out`` (replacing an old one only now)."""
+        old = None
+        if out.exists():
+            if any(out.iterdir()):
+                old = out.with_name(f".{out.name}.old-{uuid.uuid4().hex[:8]}")
+                os.replace(out, old)
+            else:
+                out.rmdir()
+        os.replace(tmp, out)
+        stale = out.with_name(out.name + ".failed")
+        if stale.is_dir():
+            shutil.rmtree(stale, ignore_errors=True)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+
+    def _write_summary(self, result: PipelineResult, tmp: Path) -> None:
+        result.files["summary"] = tmp / "summary.md"
+        result.files["result"] = tmp / "pipeline.json"
+        result.out_dir = tmp
+        (tmp / "summary.md").write_text(summary_markdown(result), encoding="utf-8")
+        data = result.to_dict()
+        data["out_dir"] = "."
+        (tmp / "pipeline.json").write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+
+    # ------------------------------------------------------------------ many prompts
+    def run_batch(self, prompts: list[PromptSpec], out_dir, robot: str = "op3_like", playback: str = "dry-run",
+                  render: bool = False, overwrite: bool = False, progress: bool | None = None) -> Path:
+        """Run every prompt into ``out_dir/NNN_slug/`` and write ``out_dir/summary.csv``.
+
+        A prompt whose run fails is recorded (``error`` column, ``NNN_slug.failed/``) and the
+        batch goes on.  Returns the path of ``summary.csv``.
+        """
+        from tqdm import tqdm
+
+        if not prompts:
+            raise InputError("no prompts to run")
+        if playback == "port":
+            raise InputError("a prompt list cannot play on hardware; run one prompt with --port")
+        check_robot(robot)
+        check_playback(playback, None)
+        out = check_out_dir(out_dir, overwrite)
+        for spec in prompts:
+            check_text(spec.text), check_seconds(spec.seconds), check_seed(spec.seed)
+        self.load_models()
+        for spec in prompts:
+            if spec.seconds is not None:
+                try:
+                    self.generator.frames_for(spec.seconds)
+                except InputError as exc:
+                    raise InputError(f"prompt on line {spec.line}: {exc}") from None
+        out.mkdir(parents=True, exist_ok=True)
+        columns = ["index", "text", "seconds", "seed", "folder", "passed", "failed_checks", "playback",
+                   *(f"{s}_s" for s in (*STAGES, "total")), "error"]
+        rows = []
+        for i, spec in enumerate(tqdm(prompts, desc="prompts", unit="prompt", disable=None if progress is None
+                                      else not progress)):
+            folder = f"{i:03d}_{slug(spec.text)}"
+            row = {"index": i, "text": spec.text, "seed": spec.seed, "folder": folder}
+            try:
+                res = self.run(spec.text, robot=robot, seconds=spec.seconds, seed=spec.seed, out_dir=out / folder,
+                               playback=playback, render=render, overwrite=True)
+            except MotokError as exc:
+                row.update(passed=False, error=str(exc), seconds=spec.seconds)
+            else:
+                row.update(seconds=round(res.seconds, 3), passed=res.passed, failed_checks=";".join(res.failed_checks),
+                           playback=res.playback.status,
+                           **{f"{k}_s": round(v, 3) for k, v in res.timings.items() if k in (*STAGES, "total")})
+            rows.append(row)
+        buffer = io.StringIO()
+        writer = csv.DictWriter(buffer, fieldnames=columns, extrasaction="ignore")
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: "" if row.get(k) is None else row.get(k, "") for k in columns})
+        path = out / "summary.csv"
+        part = out / ".summary.csv.partial"
+        part.write_text(buffer.getvalue(), encoding="utf-8")
+        os.replace(part, path)
+        return path
+
+
+# ----------------------------------------------------------------------------- summary.md
+_FILE_LABELS = {
+    "motion": "human motion (joints, features, tokens)",
+    "robot": "robot trajectory (qpos, contacts, keypoint errors)",
+    "report": "validation report",
+    "video": "validation video (reference | physics rollout)",
+    "playback_log": "playback log (one row per control tick)",
+    "playback_stats": "playback loop statistics",
+    "playback_video": "simulated playback video",
+    "result": "this summary, machine-readable",
+}
+
+
+def summary_markdown(result: PipelineResult) -> str:
+    """``summary.md``: verdict, failing checks, per-stage times and links to every file."""
+    root = result.out_dir
+    verdict = "PASS" if result.passed else "FAIL"
+    lines = [f"# {verdict}: \"{result.text}\"", "",
+             f"* robot: `{result.robot}`; clip: {result.seconds:.2f} s; seed: {result.seed}",
+             f"* models: `{result.model}`" if result.model else "* models: -",
+             f"* validation: **{verdict}**"
+             + (f" - failing checks: {', '.join(f'`{c}`' for c in result.failed_checks)}" if result.failed_checks else
+                " - every check passed"),
+             f"* playback ({result.playback.mode}): **{result.playback.status}**"
+             + (f" - {result.playback.line}" if result.playback.line else "")
+             + (f" - {result.playback.error}" if result.playback.error else ""), ""]
+    if result.playback.gate:
+        lines += [f"Hardware playback would be refused: {result.playback.gate}.", ""]
+    if result.report:
+        from motok_robot.sim.report import summary_text
+
+        lines += ["## Validation", "", "```", summary_text(result.report), "```", ""]
+    lines += ["## Stage times", "", "| stage | seconds |", "|---|---:|"]
+    for key in ("load", "setup", *STAGES, "total"):
+        if key in result.timings:
+            lines.append(f"| {key} | {result.timings[key]:.3f} |")
+    lines += ["", "## Files", ""]
+    for key, path in result.files.items():
+        if key == "summary":
+            continue
+        name = _rel(path, root)
+        label = _FILE_LABELS.get(key) or ("plot: " + key[5:].replace("_", " ") if key.startswith("plot_") else key)
+        lines.append(f"* [{name}]({name}) - {label}")
+    for key in [k for k in result.files if k.startswith("plot_")]:
+        name = _rel(result.files[key], root)
+        lines += ["", f"![{key[5:]}]({name})"]
+    if result.notes:
+        lines += ["", "## Notes", ""] + [f"* {n}" for n in result.notes]
+    return "\n".join(lines) + "\n"
