@@ -229,3 +229,56 @@ def test_data_modules_do_not_import_torch():
     code = ("import sys, motok_robot.data.prepare, motok_robot.data.dataset, motok_robot.data.cli, "
             "motok_robot.data.sources, motok_robot.data.humanml3d; print('torch' in sys.modules)")
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "False"
+
+
+ACRNN_NAMES = {
+    "pelvis": "hip", "left_hip": "lThigh", "right_hip": "rThigh", "left_knee": "lShin", "right_knee": "rShin",
+    "spine2": "abdomen", "left_ankle": "lFoot", "right_ankle": "rFoot", "spine3": "chest", "neck": "neck",
+    "left_collar": "lCollar", "right_collar": "rCollar", "head": "head", "left_shoulder": "lShldr",
+    "right_shoulder": "rShldr", "left_elbow": "lForeArm", "right_elbow": "rForeArm", "left_wrist": "lHand",
+    "right_wrist": "rHand",
+}
+
+
+def test_prepare_acrnn_uses_readme_frame_rate_and_drops_first_frame(tmp_path):
+    root = tmp_path / "acrnn-bvh"
+    (root / "salsa").mkdir(parents=True)
+    (root / "martial").mkdir()
+    (root / "readme.txt").write_text("indian framerate 120\nsalsa  framerate 60\nmartial framerate 120\n")
+    skip = ("spine1", "left_foot", "right_foot")  # toes come from lFoot's End Site
+    for genre in ("salsa", "martial"):  # both headers claim 120 fps
+        (root / genre / "01.bvh").write_text(canonical_bvh_text(frames=61, fps=120.0, names=ACRNN_NAMES, skip=skip))
+    out = tmp_path / "out"
+    assert _run("--source", f"acrnn={root}", "--out", str(out), "--workers", "1") == 0
+    ds = PreparedDataset(out, "all")
+    # 60 frames after dropping frame 0: 59/60 s at 60 fps -> 20 frames at 20 fps; at 120 fps -> 10
+    assert ds.record("acrnn/salsa/01")["frames"] == 20
+    assert ds.record("acrnn/martial/01")["frames"] == 10
+    assert any("salsa" in t for t in ds.texts("acrnn/salsa/01"))
+    assert ds.record("acrnn/salsa/01")["derived_joints"] == ["spine1"]
+    assert "MIT" in ds.record("acrnn/salsa/01")["licence"]
+
+
+def test_cmu_trial_and_its_deepmimic_conversion_share_a_split(tmp_path):
+    cmu = tmp_path / "cmu" / "subjects" / "02"
+    cmu.mkdir(parents=True)
+    (cmu / "02.asf").write_text(cmu_like_asf())
+    dm = tmp_path / "dm" / "cmu" / "cmu01-09" / "02"
+    dm.mkdir(parents=True)
+    (tmp_path / "cmu-descriptions.csv").write_text('"Subject","Trial #","Motion Description","framerate"\n')
+    with (tmp_path / "cmu-descriptions.csv").open("a") as fh:
+        for t in range(1, 9):
+            fh.write(f'2,{t},"walk",120\n')
+            (cmu / f"02_0{t}.amc").write_text(cmu_like_amc(frames=30 + 6 * t))
+            (dm / f"02_0{t}.txt").write_text(deepmimic_json(frames=10 + 3 * t))
+    out = tmp_path / "out"
+    assert _run("--source", f"cmu={tmp_path / 'cmu'}", "--source", f"deepmimic={tmp_path / 'dm'}",
+                "--out", str(out), "--workers", "1") == 0
+    ds = PreparedDataset(out, "all")
+    splits = set()
+    for t in range(1, 9):
+        a, b = ds.record(f"cmu/02_0{t}"), ds.record(f"deepmimic/cmu/02_0{t}")
+        assert a["split"] == b["split"] == split_of(f"cmu/02_0{t}")
+        assert any("walks" in s for s in b["texts"])  # DeepMimic's CMU clips get the CMU description
+        splits.add(a["split"])
+    assert len(splits) > 1

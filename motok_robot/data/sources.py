@@ -138,14 +138,14 @@ def iter_jobs(kind: str, path: str | Path, options: SourceOptions) -> Iterator[J
         yield from _asf_jobs(kind, path, options)
         return
     readme_fps: dict[str, float] = {}
+    if kind == "acrnn" and path.is_dir():  # read the frame rates before any BVH
+        for readme in sorted(path.rglob("readme.txt")):
+            readme_fps.update(_acrnn_readme(readme.read_text(errors="replace")))
     for member, read in _members(path):
         pp = PurePosixPath(member)
         low = pp.name.lower()
         if kind == "acrnn" and low == "readme.txt":
-            for line in _decode(read()).splitlines():
-                m = re.match(r"\s*(\w+)\s+framerate\s+([\d.]+)", line, re.I)
-                if m:
-                    readme_fps[m.group(1).lower()] = float(m.group(2))
+            readme_fps.update(_acrnn_readme(_decode(read())))
             continue
         if kind in ("bandai", "acrnn", "bvh") and low.endswith(".bvh"):
             if kind == "acrnn" and low == "standard.bvh":
@@ -154,6 +154,16 @@ def iter_jobs(kind: str, path: str | Path, options: SourceOptions) -> Iterator[J
             yield Job(kind, _label(path, member), {"bvh": _decode(read())}, meta)
         elif kind == "deepmimic" and low.endswith((".txt", ".json")) and not low.startswith(("license", "readme")):
             yield Job(kind, _label(path, member), {"json": _decode(read())}, {"member": member})
+
+
+def _acrnn_readme(text: str) -> dict[str, float]:
+    """``{"salsa": 60.0, ...}`` from acRNN's readme.txt lines ``salsa  framerate 60``."""
+    out = {}
+    for line in text.splitlines():
+        m = re.match(r"\s*(\w+)\s+framerate\s+([\d.]+)", line, re.I)
+        if m:
+            out[m.group(1).lower()] = float(m.group(2))
+    return out
 
 
 def _asf_jobs(kind: str, path: Path, options: SourceOptions) -> Iterator[Job | Skipped]:
@@ -291,7 +301,8 @@ def run_job(job: Job, options: SourceOptions) -> list[Clip]:
         texts = T.description_texts(desc, cid) if desc else []
         texts = texts or T.lookup_texts(options.text_index, cid, job.file)
         clip.texts = texts
-        clip.labels = {"description": desc, "fps_used": fps, "group": cid}
+        # the same CMU trial may also come converted by DeepMimic: one group keeps them in one split
+        clip.labels = {"description": desc, "fps_used": fps, "group": f"cmu/{key}" if (kind == "cmu" and key) else cid}
         return [clip]
     if kind == "deepmimic":
         from motok_robot.data import deepmimic
@@ -307,7 +318,7 @@ def run_job(job: Job, options: SourceOptions) -> list[Clip]:
             clip.texts = T.description_texts(options.cmu_descriptions[key]["description"], cid)
         else:
             clip.texts = T.lookup_texts(options.text_index, cid, job.file) or T.deepmimic_texts(stem, cid)
-        labels = {"group": cid.removesuffix("_mirror")}
+        labels = {"group": f"cmu/{key}" if (top == "cmu" and key) else cid.removesuffix("_mirror")}
         if stem.endswith("_mirror"):
             labels["mirror_of"] = cid.removesuffix("_mirror")
         clip.labels = labels
