@@ -138,3 +138,42 @@ def test_calibrate_cli_on_emulated_chain(tmp_path, capsys):
     assert main(["servo", "calibrate", "--robot", "op3_like", "--emulate", "--yes", "--out", str(out)]) == 0
     assert "zero offsets of 20 servos" in capsys.readouterr().out
     assert load(out).servos[0].zero_offset_ticks == 2048
+
+
+def test_play_ctrl_c_exits_130_with_one_line_after_holding(tmp_path, robot, capsys, monkeypatch):
+    import motok_robot.servo.streamer as streamer_module
+
+    real = streamer_module.limit_command
+    calls = {"n": 0}
+
+    def interrupt_at_tick_20(*args):
+        calls["n"] += 1
+        if calls["n"] == 20:
+            raise KeyboardInterrupt
+        return real(*args)
+
+    monkeypatch.setattr(streamer_module, "limit_command", interrupt_at_tick_20)
+    clip = write_clip(tmp_path, robot)
+    rc = main(["play", str(clip), "--dry-run", "--ramp", "0.2", "--no-realtime"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 130 and "\n" not in err
+    assert err.startswith("motok-robot: interrupted (Ctrl-C)") and "holding their present position" in err
+    rows = read_log(tmp_path / "robot.playback.csv")
+    assert len(rows["tick"]) == 20 and rows["phase"][-1] == "hold"
+
+
+def test_play_fault_in_preflight_names_the_joint(tmp_path, robot, capsys, monkeypatch):
+    import motok_robot.servo.emulator as emulator_module
+
+    real = emulator_module.emulated_chain
+
+    def overloaded_knee(*args, **kwargs):
+        chain = real(*args, **kwargs)
+        chain.set_hardware_error(13, 0x20)
+        return chain
+
+    monkeypatch.setattr(emulator_module, "emulated_chain", overloaded_knee)
+    clip = write_clip(tmp_path, robot)
+    assert main(["play", str(clip), "--dry-run"]) == 2
+    err = one_line_error(capsys)
+    assert "servo 13 (r_knee)" in err and "overload" in err

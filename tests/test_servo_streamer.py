@@ -328,3 +328,13 @@ def test_validation_report_gate(tmp_path):
     other.write_text("{not json")
     with pytest.raises(InputError, match="unreadable"):
         check_validation_report(npz, other)
+
+
+def test_reading_every_fifth_tick_leaves_gaps_in_the_log_only(smap, tmp_path):
+    traj = sine_trajectory(smap, seconds=0.4)
+    streamer, chain, log = run(smap, traj, tmp_path, config=PlaybackConfig(rate_hz=RATE, ramp_s=0.5, read_every=5))
+    result = streamer.play(traj)
+    rows = read_log(log)
+    present = rows[f"present_{smap.joints[0]}"]
+    assert np.isnan(present).sum() == result.ticks - len(range(0, result.ticks, 5))
+    assert not np.isnan(present[::5]).any()
