@@ -320,7 +320,7 @@ class Streamer:
                                   "EEPROM register). Set it to 0 with torque off for the fastest loop.",
                                   PlaybackWarning, stacklevel=2)
         bus.set_bus_watchdog(ids, 0)  # clears a watchdog that fired in an earlier session
-        present = bus.read_present_positions(ids)
+        present = self._retry(lambda: bus.read_present_positions(ids))
         outside = [f"{self._label(i)} at {p} outside [{lo}, {hi}]"
                    for i, p, lo, hi in zip(ids, present, self.map.min_ticks, self.map.max_ticks) if not lo <= p <= hi]
         if outside:
@@ -334,12 +334,26 @@ class Streamer:
         self.present = present
         return present
 
+    def _retry(self, operation):
+        """``operation()``, retried up to ``retry_budget`` times on a communication error."""
+        for attempt in range(self.config.retry_budget + 1):
+            try:
+                return operation()
+            except ServoCommError:
+                if attempt == self.config.retry_budget:
+                    raise
+                self.bus.reset()
+
     # ------------------------------------------------------------------ streaming
     def play(self, trajectory: Trajectory, present: np.ndarray | None = None) -> PlaybackResult:
         """Ramp to frame 0 and stream ``trajectory``; runs :meth:`preflight` first if needed."""
         if present is None:
             present = self.present if self.present is not None else self.preflight()
         cfg, bus, ids, smap, clock = self.config, self.bus, self.ids, self.map, self.clock
+        present = np.asarray(present, dtype=np.int64)
+        if present.shape != (smap.n,) or ((present < smap.min_ticks) | (present > smap.max_ticks)).any():
+            raise HardwareError(f"cannot start from present positions {present.tolist()}: they must be {smap.n} "
+                                "ticks inside the servo limits")
         period = 1.0 / cfg.rate_hz
         targets, is_ramp = plan_targets(trajectory, present, smap, cfg.rate_hz, cfg.ramp_s)
         n_ticks = len(targets)
