@@ -190,6 +190,17 @@ def test_prepare_humanml3d_keeps_features_splits_and_stats(tmp_path):
     assert ds.record("humanml3d/M000001")["mirror_of"] == "humanml3d/000001"
     np.testing.assert_array_equal(ds.features("humanml3d/000001"), np.load(root / "new_joint_vecs" / "000001.npy"))
     np.testing.assert_array_equal(ds.std, np.ones(263, np.float32))  # HumanML3D's own Std.npy
+    # the same folder as an archive: extracted to a temporary folder that is removed afterwards
+    import tempfile
+    from pathlib import Path
+
+    arch = tmp_path / "HumanML3D.tar.gz"
+    with tarfile.open(arch, "w:gz") as tf:
+        tf.add(root, arcname="HumanML3D")
+    before = set(Path(tempfile.gettempdir()).glob("motok-prepare-*"))
+    assert _run("--source", f"humanml3d={arch}", "--out", str(tmp_path / "o2"), "--workers", "1") == 0
+    assert set(Path(tempfile.gettempdir()).glob("motok-prepare-*")) == before
+    assert PreparedDataset(tmp_path / "o2", "all").clip_ids == ds.clip_ids
 
 
 def test_split_is_deterministic_and_roughly_85_5_10():

@@ -23,6 +23,7 @@ import hashlib
 import json
 import shutil
 import sys
+import tempfile
 import time
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
@@ -247,8 +248,9 @@ def prepare(cfg: PrepareConfig) -> dict:
             index_f.write(json.dumps(rec) + "\n")
 
     pool = ProcessPoolExecutor(max_workers=cfg.workers) if cfg.workers > 1 else None
+    workdir = tempfile.TemporaryDirectory(prefix="motok-prepare-")  # HumanML3D archives only
     try:
-        for kind, path in cfg.sources:
+        for i, (kind, path) in enumerate(cfg.sources):
             options = S.SourceOptions(
                 joint_map=maps.get(kind),
                 text_index=options_base.text_index,
@@ -262,11 +264,12 @@ def prepare(cfg: PrepareConfig) -> dict:
                     options.cmu_descriptions = load_cmu_descriptions(csv_path)
                 elif kind == "cmu":
                     warnings.append(f"{path}: no cmu-descriptions.csv found next to it; CMU clips get no texts")
-            if kind == "humanml3d" and all_humanml:
+            if kind == "humanml3d":
                 from motok_robot.data import humanml3d
 
-                given_mean_std = humanml3d.load_mean_std(path if (Path(path) / "Mean.npy").exists() else
-                                                         next((p.parent for p in Path(path).rglob("Mean.npy")), path))
+                path = str(S.humanml3d_root(path, Path(workdir.name) / f"source{i}"))
+                if all_humanml:
+                    given_mean_std = humanml3d.load_mean_std(path)
             st = stats.setdefault(kind, _Stats())
             bar = tqdm(desc=f"{kind}: {Path(path).name}", unit="file", disable=True if cfg.progress is False else None)
             n_jobs = 0
@@ -299,6 +302,7 @@ def prepare(cfg: PrepareConfig) -> dict:
         index_f.close()
         if pool is not None:
             pool.shutdown(cancel_futures=True)
+        workdir.cleanup()
 
     total = sum(s.clips for s in stats.values())
     if total == 0:

@@ -211,15 +211,43 @@ def _asf_jobs(kind: str, path: Path, options: SourceOptions) -> Iterator[Job | S
         yield Skipped(_label(path, m), why)
 
 
-def _humanml3d_jobs(path: Path) -> Iterator[Job | Skipped]:
+def humanml3d_root(path: str | Path, workdir: str | Path | None = None) -> Path:
+    """The folder holding ``new_joint_vecs/`` under ``path``.
+
+    An archive is extracted into ``workdir`` first (HumanML3D needs three files per clip from
+    different folders, so it is not streamed); the caller owns ``workdir`` and deletes it.
+    """
+    path = Path(path)
     if not path.is_dir():
-        raise InputError(f"{path}: a HumanML3D source must be a folder (extract the archive first)")
-    root = path
-    if not (root / "new_joint_vecs").is_dir():
-        cands = [p.parent for p in root.rglob("new_joint_vecs") if p.is_dir()]
-        if not cands:
-            raise InputError(f"{path}: not a HumanML3D folder (no new_joint_vecs/ inside)")
-        root = cands[0]
+        if workdir is None:
+            raise InputError(f"{path}: a HumanML3D source must be a folder or an archive (with a work folder)")
+        dest = Path(workdir)
+        dest.mkdir(parents=True, exist_ok=True)
+        _extract(path, dest)
+        path = dest
+    if (path / "new_joint_vecs").is_dir():
+        return path
+    cands = sorted(p.parent for p in path.rglob("new_joint_vecs") if p.is_dir())
+    if not cands:
+        raise InputError(f"{path}: not a HumanML3D folder (no new_joint_vecs/ inside)")
+    return cands[0]
+
+
+def _extract(archive: Path, dest: Path) -> None:
+    name = archive.name.lower()
+    try:
+        if name.endswith(".zip"):
+            with zipfile.ZipFile(archive) as zf:
+                zf.extractall(dest)  # zipfile drops absolute paths and ".." components
+        else:
+            with tarfile.open(archive, "r:*") as tf:
+                tf.extractall(dest, filter="data")  # refuses links/paths outside dest
+    except (tarfile.TarError, zipfile.BadZipFile, OSError, EOFError) as exc:
+        raise InputError(f"{archive}: cannot extract archive ({exc})") from None
+
+
+def _humanml3d_jobs(path: Path) -> Iterator[Job | Skipped]:
+    root = humanml3d_root(path)
     from motok_robot.data import humanml3d
 
     for cid in humanml3d.list_ids(root):
