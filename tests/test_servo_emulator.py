@@ -208,3 +208,55 @@ def test_missing_and_busy_serial_port_are_one_line_hardware_errors(tmp_path):
         holder.close()
         os.close(master)
         os.close(slave)
+
+
+def test_dynamixel_bus_over_a_real_serial_device_with_emulated_servos_behind_it():
+    """pyserial + DynamixelBus's serial port handler on a pseudo-terminal; the other end of the
+    pty is served by an emulated chain (so the serial code path itself is exercised)."""
+    import threading
+    import time
+
+    if not hasattr(os, "openpty"):
+        pytest.skip("no pseudo-terminals")
+    master, slave = os.openpty()
+    chain = EmulatedServoChain.from_ids([1, 2, 3], positions=[1000, 2000, 3000])
+    chain.setBaudRate(2_000_000)  # the emulated wire runs at the servos' baud
+    stop = threading.Event()
+
+    def wire():
+        os.set_blocking(master, False)
+        while not stop.is_set():
+            try:
+                data = os.read(master, 4096)
+            except BlockingIOError:
+                data = b""
+            except OSError:
+                return
+            if data:
+                chain.writePort(data)
+            out = chain.readPort(4096)
+            if out:
+                os.write(master, out)
+            if not data and not out:
+                time.sleep(0.0002)
+
+    thread = threading.Thread(target=wire, daemon=True)
+    thread.start()
+    bus = DynamixelBus(os.ttyname(slave), 2_000_000, latency_timer_ms=16)
+    try:
+        assert bus.ping(2) == 1020
+        bus.set_return_delay_time([1, 2, 3], 0)
+        assert bus.read_present_positions([1, 2, 3]).tolist() == [1000, 2000, 3000]
+        bus.write_goal_positions([1, 2, 3], np.array([1100, 2100, 3100]))
+        deadline = time.time() + 2
+        while chain.servos[3].goal_history != [3100] and time.time() < deadline:
+            time.sleep(0.001)
+        assert [chain.servos[i].goal_history for i in (1, 2, 3)] == [[1100], [2100], [3100]]
+        with pytest.raises(ServoCommError, match="servo 9"):
+            bus.ping(9)
+    finally:
+        stop.set()
+        thread.join(1)
+        bus.close()
+        os.close(master)
+        os.close(slave)

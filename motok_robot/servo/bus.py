@@ -30,6 +30,7 @@ from __future__ import annotations
 import abc
 import os
 import sys
+import time
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -199,6 +200,21 @@ def _make_serial_port_handler(port: str, latency_timer_ms: float):
         def setPacketTimeout(self, packet_length):  # noqa: N802
             self.packet_start_time = self.getCurrentTime()
             self.packet_timeout = self.tx_time_per_byte * packet_length + 2.0 * latency_timer_ms + 2.0
+
+        def getCurrentTime(self):  # noqa: N802 (ms; monotonic, unlike the SDK's time.time())
+            return time.perf_counter() * 1000.0
+
+        def isPacketTimeout(self):  # noqa: N802
+            # The SDK checks the time after an empty read; a host descheduled past the deadline
+            # would drop a reply that is already in the buffer.  Bytes waiting = not timed out
+            # (bounded, so a stream of garbage still ends in a timeout).
+            elapsed = self.getTimeSinceStart()
+            if elapsed <= self.packet_timeout:
+                return False
+            if elapsed <= 4.0 * self.packet_timeout and self.ser.in_waiting:
+                return False
+            self.packet_timeout = 0
+            return True
 
     return SerialPortHandler(port)
 
