@@ -324,6 +324,16 @@ def test_validation_report_gate(tmp_path):
     assert check_validation_report(npz, robot_name="op3_like")["passed"] is True
     report.write_text(json.dumps({"passed": True, "robot": "op3_like", "input": str(npz)}))
     assert check_validation_report(npz, robot_name="op3_like")["passed"] is True
+    import hashlib
+
+    npz.write_bytes(b"validated content")
+    digest = hashlib.sha256(b"validated content").hexdigest()
+    report.write_text(json.dumps({"passed": True, "robot": "op3_like", "input": {"path": "/old/name.npz",
+                                                                               "sha256": digest}}))
+    assert check_validation_report(npz, robot_name="op3_like")["passed"] is True  # renamed, same content
+    npz.write_bytes(b"edited after validation")
+    with pytest.raises(InputError, match="changed after it was validated"):
+        check_validation_report(npz, robot_name="op3_like")
     other = tmp_path / "elsewhere.json"
     other.write_text("{not json")
     with pytest.raises(InputError, match="unreadable"):

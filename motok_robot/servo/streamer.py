@@ -30,6 +30,7 @@ consecutive writes are never closer than one period and the step limit stays a v
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import math
 import warnings
@@ -129,8 +130,8 @@ def check_validation_report(trajectory_path: str | Path, report_path: str | Path
     """Require a passing validation report for ``trajectory_path``; returns the report (or None).
 
     The report is ``report_path`` or ``report.json`` next to the trajectory.  It must parse,
-    have ``"passed": true``, and (when it records them) name the same robot and trajectory
-    file.  Otherwise InputError, unless ``force`` (then a :class:`PlaybackWarning`).
+    have ``"passed": true``, name the same robot, and match the file: by ``input.sha256`` (the
+    digest of the validated robot.npz) when the report has it, else by file name.  Otherwise InputError, unless ``force`` (then a :class:`PlaybackWarning`).
     """
     trajectory_path = Path(trajectory_path)
     path = Path(report_path) if report_path is not None else trajectory_path.with_name("report.json")
@@ -145,7 +146,9 @@ def check_validation_report(trajectory_path: str | Path, report_path: str | Path
             problem = f"validation report {path} is unreadable ({exc})"
         else:
             validated = report.get("input") if isinstance(report, dict) else None
-            if isinstance(validated, dict):  # {"path": ..., "frames": ...}
+            digest = None
+            if isinstance(validated, dict):  # {"path": ..., "frames": ..., "sha256": ...}
+                digest = validated.get("sha256") if isinstance(validated.get("sha256"), str) else None
                 validated = validated.get("path")
             validated = validated if isinstance(validated, str) and validated else None
             if not isinstance(report, dict) or "passed" not in report:
@@ -156,6 +159,10 @@ def check_validation_report(trajectory_path: str | Path, report_path: str | Path
                 problem = f"validation report {path} did not pass" + (f" (failed: {', '.join(failed)})" if failed else "")
             elif robot_name and report.get("robot") and str(report["robot"]) != robot_name:
                 problem = f"validation report {path} is for robot '{report['robot']}', not '{robot_name}'"
+            elif digest is not None:  # the content decides, whatever the file is called now
+                if not trajectory_path.is_file() or _sha256(trajectory_path) != digest.lower():
+                    problem = (f"validation report {path} is for different content (sha256 {digest[:12]}...): "
+                               f"{trajectory_path.name} changed after it was validated")
             elif validated is not None and Path(validated).name != trajectory_path.name:
                 problem = f"validation report {path} validated {validated}, not {trajectory_path.name}"
     if problem is None:
@@ -166,6 +173,14 @@ def check_validation_report(trajectory_path: str | Path, report_path: str | Path
     warnings.warn(f"{trajectory_path}: playing WITHOUT a passing validation report ({problem}) because of --force",
                   PlaybackWarning, stacklevel=2)
     return report
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def plan_targets(trajectory: Trajectory, start_ticks: np.ndarray, servo_map: ServoMap, rate_hz: float,
