@@ -57,7 +57,7 @@ class SolverConfig:
     acceptable_tol: float = 1e-4
     constr_viol_tol: float = 1e-6  # metres / radians: contact equalities hold to a micrometre
     max_iter: int = 200
-    hessian: str = "gauss-newton"  # or "exact", "limited-memory"
+    hessian: str = "exact"  # or "gauss-newton" (objective only + exact constraint curvature), "limited-memory"
     linear_solver: str = "mumps"
     mu_strategy: str = "adaptive"
     mu_init: float = 1e-2  # the primal start is close (previous window / previous frame)
@@ -80,6 +80,7 @@ class RetargetConfig:
     overlap: int = 10
     mode: str = "trajectory"  # or "per-frame"
     scale: bool = True
+    scaling: str = "segments"  # or "limbs" (retarget.targets)
     allow_partial: bool = False
     weights: CostWeights = field(default_factory=CostWeights)
     contacts: ContactConfig = field(default_factory=ContactConfig)

@@ -1,0 +1,75 @@
+"""``motok-robot retarget``: human motion (motion.npz or mocap file) -> robot.npz.
+
+Light module: casadi / mujoco are imported inside the handler.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def register(commands, groups) -> None:
+    from retarget.config import RetargetConfig
+
+    d = RetargetConfig()
+    p = commands.add_parser(
+        "retarget",
+        help="retarget a human motion onto a robot (contact-aware trajectory optimisation)",
+        description=(
+            "Retarget INPUT (motion.npz from generation, or a BVH / ASF+AMC / DeepMimic JSON mocap file) onto a "
+            "robot with windowed CasADi/IPOPT trajectory optimisation: keypoint tracking, planted feet during "
+            "contact phases, joint and velocity limits. Writes robot.npz (docs/CONTRACTS.md)."
+        ),
+    )
+    p.add_argument("input", metavar="INPUT", help="motion.npz, .bvh, .amc (with its .asf) or DeepMimic .json")
+    p.add_argument("--robot", required=True, help="robot name (motok-robot robots list) or path to its MJCF/description")
+    p.add_argument("--out", required=True, help="output robot.npz")
+    p.add_argument("--window", type=int, default=d.window, help=f"frames optimised together (default {d.window})")
+    p.add_argument("--overlap", type=int, default=d.overlap, help=f"look-ahead frames shared by consecutive windows (default {d.overlap})")
+    p.add_argument("--mode", choices=("trajectory", "per-frame"), default=d.mode, help="windowed trajectory optimisation or the per-frame IK baseline")
+    p.add_argument("--allow-partial", action="store_true", help="write the output even if some window did not converge")
+    p.add_argument("--no-scale", action="store_true", help="use the joints as robot targets unscaled (motion already robot-sized)")
+    p.add_argument("--skeleton", default="bandai", help="BVH joint map: bandai, acrnn or a joint-map JSON file (default bandai)")
+    p.add_argument("--asf", default=None, help="ASF skeleton file for an .amc input (default: the only .asf next to it)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from motok_robot.errors import MotokError
+    from retarget.config import RetargetConfig
+    from retarget.io import read_input, write_robot_npz
+    from retarget.metrics import measure
+    from retarget.robot_model import load_robot
+    from retarget.solve import Retargeter
+
+    config = replace(
+        RetargetConfig(), window=args.window, overlap=args.overlap, mode=args.mode,
+        allow_partial=args.allow_partial, scale=not args.no_scale,
+    )
+    motion = read_input(args.input, skeleton=args.skeleton, asf=args.asf)
+    robot = load_robot(args.robot)
+    retargeter = Retargeter(robot, config)
+    result = retargeter.run(motion.joints, motion.fps, source=motion.name)
+    m = measure(retargeter.kin, result.x, result.contacts, result.keypoint_error, result.fps, config.ground_height)
+    failed = result.failed_windows()
+    print(
+        f"{robot.name}: {m.frames} frames, {len(result.windows)} windows ({config.mode}), solved in {result.solve_seconds:.2f} s "
+        f"({m.frames / max(result.solve_seconds, 1e-9):.0f} frames/s)\n"
+        f"  keypoint error mean {m.keypoint_error_mean * 100:.2f} cm; {m.contact_phases} contact phases, sole drift max "
+        f"{m.sole_drift_max * 1000:.2f} mm, lowest sole corner {m.sole_min_height * 1000:.2f} mm\n"
+        f"  joint range excess {m.joint_range_excess:.2e} rad, max velocity {m.velocity_ratio_max * 100:.0f}% of limit, "
+        f"mean joint acceleration {m.joint_acceleration_mean:.1f} rad/s^2"
+    )
+    for w in failed:
+        print(f"  window frames {w.start}-{w.stop - 1}: {w.status}; violated: {w.violated or 'none'} ({w.violation:.3g})", file=sys.stderr)
+    if failed and not config.allow_partial:
+        raise MotokError(
+            f"{len(failed)} of {len(result.windows)} windows did not converge (first: frames {failed[0].start}-{failed[0].stop - 1}, "
+            f"{failed[0].violated or failed[0].status}); nothing written, use --allow-partial to keep the result"
+        )
+    path = write_robot_npz(args.out, result)
+    print(f"wrote {path}")
+    return 0

@@ -1,0 +1,172 @@
+"""Files in and out of retargeting.
+
+Input: ``motion.npz`` from generation (``joints`` float32 ``[T, 22, 3]`` metres z-up, ``fps``),
+or a mocap file imported with :mod:`motok_robot.data` (BVH, ASF+AMC, DeepMimic JSON).
+
+Output: ``robot.npz`` exactly as in docs/CONTRACTS.md::
+
+    qpos            float64 [T, nq]   MuJoCo order: free base pos (m), quat w x y z, joints (rad)
+    joint_names     str [nj]          actuated joints, qpos order
+    robot           str               robot name
+    fps             float             frames per second
+    contacts        bool [T, 2]       foot contact (left, right) detected on the human motion
+    keypoint_error  float64 [T, K]    metres between robot keypoint site and scaled human joint
+    keypoint_names  str [K]           the human joint of each keypoint
+    source          float32 [T, 22, 3] human joints as given (metres, z up)
+    solver_status   str (JSON)        per window: start, stop, status, success, iterations,
+                                      violated (constraint or null), violation, seconds
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from motok_robot.errors import InputError
+
+MOCAP_SUFFIXES = (".bvh", ".amc", ".json")
+
+
+@dataclass
+class HumanMotion:
+    """A human motion to retarget: ``joints[T, 22, 3]`` (m, z up) at ``fps``; ``name`` for messages."""
+
+    joints: np.ndarray
+    fps: float
+    name: str
+
+
+def read_motion_npz(path: str | Path) -> HumanMotion:
+    """Read ``joints`` and ``fps`` from a generation ``motion.npz``."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: file not found")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if "joints" not in data.files:
+                raise InputError(f"{path}: no 'joints' array (fields: {', '.join(data.files) or 'none'})")
+            joints = np.asarray(data["joints"])
+            fps = float(data["fps"]) if "fps" in data.files else 20.0
+    except InputError:
+        raise
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise InputError(f"{path}: cannot read as .npz ({exc})") from None
+    return HumanMotion(joints=joints, fps=fps, name=str(path))
+
+
+def read_mocap(path: str | Path, skeleton: str = "bandai", asf: str | Path | None = None, amc_fps: float = 120.0) -> HumanMotion:
+    """Import a mocap file onto the canonical body (20 fps) with :mod:`motok_robot.data`.
+
+    ``.bvh``: ``skeleton`` is ``bandai``, ``acrnn`` or a joint-map JSON path; ``.amc``: the
+    skeleton file is ``asf`` or the only ``.asf`` next to it; ``.json``: DeepMimic motion.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: file not found")
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".bvh":
+            from motok_robot.data.bvh import load_clip
+
+            clip = load_clip(path, skeleton=skeleton)
+        elif suffix == ".amc":
+            from motok_robot.data.asf_amc import load_clip
+
+            if asf is None:
+                candidates = sorted(path.parent.glob("*.asf"))
+                if len(candidates) != 1:
+                    raise InputError(f"{path}: give the skeleton file with --asf ({len(candidates)} .asf files next to it)")
+                asf = candidates[0]
+            clip = load_clip(asf, path, fps=amc_fps)
+        elif suffix == ".json":
+            from motok_robot.data.deepmimic import load_clip
+
+            clip = load_clip(path)
+        else:
+            raise InputError(f"{path}: unknown input type {suffix!r} (motion.npz, .bvh, .amc, DeepMimic .json)")
+    except InputError:
+        raise
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, IndexError) as exc:
+        raise InputError(f"{path}: cannot import ({type(exc).__name__}: {exc})") from None
+    return HumanMotion(joints=np.asarray(clip.joints), fps=float(clip.fps), name=str(path))
+
+
+def read_input(path: str | Path, skeleton: str = "bandai", asf: str | Path | None = None) -> HumanMotion:
+    """``motion.npz`` or a mocap file, by suffix."""
+    p = Path(path)
+    if p.suffix.lower() == ".npz":
+        return read_motion_npz(p)
+    return read_mocap(p, skeleton=skeleton, asf=asf)
+
+
+def write_robot_npz(path: str | Path, result) -> Path:
+    """Write a :class:`retarget.solve.RetargetResult` as ``robot.npz`` (see module doc)."""
+    path = Path(path)
+    if path.parent and not path.parent.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(
+        path,
+        qpos=np.asarray(result.qpos, dtype=np.float64),
+        joint_names=np.array(result.joint_names, dtype=str),
+        robot=np.array(result.robot),
+        fps=np.array(float(result.fps)),
+        contacts=np.asarray(result.contacts, dtype=bool),
+        keypoint_error=np.asarray(result.keypoint_error, dtype=np.float64),
+        keypoint_names=np.array(result.keypoint_names, dtype=str),
+        source=np.asarray(result.source, dtype=np.float32),
+        solver_status=np.array(json.dumps(result.solver_status())),
+    )
+    return path
+
+
+@dataclass
+class RobotTrajectory:
+    """Contents of a ``robot.npz`` (see module doc for axes and units)."""
+
+    qpos: np.ndarray
+    joint_names: list[str]
+    robot: str
+    fps: float
+    contacts: np.ndarray
+    keypoint_error: np.ndarray
+    keypoint_names: list[str]
+    source: np.ndarray
+    solver_status: list[dict]
+
+
+ROBOT_NPZ_FIELDS = ("qpos", "joint_names", "robot", "fps", "contacts", "keypoint_error", "keypoint_names", "source", "solver_status")
+
+
+def read_robot_npz(path: str | Path) -> RobotTrajectory:
+    """Read and check a ``robot.npz``."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: file not found")
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            missing = [f for f in ROBOT_NPZ_FIELDS if f not in d.files]
+            if missing:
+                raise InputError(f"{path}: not a robot.npz, missing {', '.join(missing)}")
+            out = RobotTrajectory(
+                qpos=np.asarray(d["qpos"], dtype=np.float64),
+                joint_names=[str(n) for n in d["joint_names"]],
+                robot=str(d["robot"]),
+                fps=float(d["fps"]),
+                contacts=np.asarray(d["contacts"], dtype=bool),
+                keypoint_error=np.asarray(d["keypoint_error"]),
+                keypoint_names=[str(n) for n in d["keypoint_names"]],
+                source=np.asarray(d["source"]),
+                solver_status=json.loads(str(d["solver_status"])),
+            )
+    except InputError:
+        raise
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise InputError(f"{path}: cannot read as .npz ({exc})") from None
+    T = out.qpos.shape[0]
+    if out.qpos.ndim != 2 or out.contacts.shape != (T, 2) or out.keypoint_error.shape[0] != T:
+        raise InputError(f"{path}: inconsistent shapes qpos {out.qpos.shape}, contacts {out.contacts.shape}, keypoint_error {out.keypoint_error.shape}")
+    return out

@@ -1,0 +1,248 @@
+"""Retarget a whole clip: contact detection, scaling, then window after window of IPOPT.
+
+Windows: window ``k`` optimises frames ``[s_k, s_k + W)``; its first ``W - overlap`` frames are
+committed, the last ``overlap`` frames only warm-start the next window (which starts at
+``s_k + W - overlap`` and re-solves them knowing more of the future). The last window is
+moved back to end at the clip's last frame (it may re-solve committed frames). Every window
+sees the two committed frames before it as fixed history: they enter the velocity and
+acceleration costs, the joint velocity bounds and the no-slip constraints, so position,
+velocity and planted feet are continuous across the seams.
+
+``mode="per-frame"`` is the same problem with ``W = 1`` and no overlap: one frame at a time,
+warm-started from the previous frame (the IK baseline).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from motok_robot.errors import InputError
+from motok_robot.motion.skeleton import JOINT_NAMES, leg_length, rest_pose
+from retarget.config import ContactConfig, RetargetConfig
+from retarget.contacts import detect_contacts
+from retarget.problem import RobotKinematics, WindowProblem
+from retarget.robot_model import RetargetRobot
+from retarget.targets import HumanTargets, make_targets
+
+
+@dataclass
+class WindowReport:
+    start: int
+    stop: int
+    status: str
+    success: bool
+    iterations: int
+    violated: str | None  # "frame F: constraint" of the worst violated constraint, None when all hold
+    violation: float
+    seconds: float
+
+
+@dataclass
+class RetargetResult:
+    """Output of :func:`Retargeter.run`.
+
+    ``qpos[T, nq]`` MuJoCo order (free base pos, quat w x y z, joints); ``x[T, nx]`` the solver
+    variables (base pos, yaw/pitch/roll, joints); ``contacts[T, 2]`` bool (left, right);
+    ``keypoint_error[T, K]`` metres between robot site and scaled human target;
+    ``targets`` the scaled human targets; ``source[T, 22, 3]`` the input joints.
+    """
+
+    robot: str
+    fps: float
+    qpos: np.ndarray
+    x: np.ndarray
+    joint_names: list[str]
+    contacts: np.ndarray
+    keypoint_error: np.ndarray
+    keypoint_names: list[str]
+    targets: HumanTargets
+    source: np.ndarray
+    windows: list[WindowReport] = field(default_factory=list)
+    solve_seconds: float = 0.0
+    mode: str = "trajectory"
+
+    @property
+    def success(self) -> bool:
+        return all(w.success for w in self.windows)
+
+    def failed_windows(self) -> list[WindowReport]:
+        return [w for w in self.windows if not w.success]
+
+    def solver_status(self) -> list[dict]:
+        return [asdict(w) for w in self.windows]
+
+
+def validate_joints(joints, source: str = "input") -> np.ndarray:
+    """Check a ``[T, 22, 3]`` joint array; raise :class:`InputError` naming the problem."""
+    j = np.asarray(joints)
+    if j.ndim != 3 or j.shape[-1] != 3:
+        raise InputError(f"{source}: joints must have shape [T, 22, 3], got {list(j.shape)}")
+    if j.shape[1] != len(JOINT_NAMES):
+        raise InputError(f"{source}: joints have {j.shape[1]} joints per frame, expected {len(JOINT_NAMES)} (canonical body)")
+    if j.shape[0] < 1:
+        raise InputError(f"{source}: the motion has no frames")
+    j = j.astype(np.float64)
+    bad = ~np.isfinite(j)
+    if bad.any():
+        t, k, _ = np.argwhere(bad)[0]
+        raise InputError(f"{source}: non-finite value (NaN/inf) at frame {t}, joint {JOINT_NAMES[k]!r} ({bad.any(axis=2).sum()} joint values bad)")
+    return j
+
+
+def scaled_contact_config(joints: np.ndarray, config: ContactConfig) -> ContactConfig:
+    """Thresholds scaled by the body's leg length relative to the canonical adult's."""
+    r = float(np.median(leg_length(joints)) / leg_length(rest_pose()))
+    if not np.isfinite(r) or r <= 0:
+        return config
+    return ContactConfig(
+        toe_height=config.toe_height * r,
+        ankle_height=config.ankle_height * r,
+        enter_speed=config.enter_speed * r,
+        exit_speed=config.exit_speed * r,
+        min_contact_frames=config.min_contact_frames,
+        min_swing_frames=config.min_swing_frames,
+        floor_percentile=config.floor_percentile,
+        floor_height=config.floor_height,
+    )
+
+
+class Retargeter:
+    """Holds a robot's kinematics and the compiled window problems (built once, reused)."""
+
+    def __init__(self, robot: RetargetRobot, config: RetargetConfig = RetargetConfig()):
+        if config.mode not in ("trajectory", "per-frame"):
+            raise InputError(f"unknown retargeting mode {config.mode!r} (trajectory or per-frame)")
+        if config.mode == "trajectory" and not (config.window >= 2 and 0 <= config.overlap < config.window - 1):
+            raise InputError(f"window {config.window} / overlap {config.overlap}: need window >= 2 and 0 <= overlap < window - 1")
+        self.robot, self.config = robot, config
+        self.kin = RobotKinematics.build(robot)
+        self._problems: dict[int, WindowProblem] = {}
+
+    @property
+    def window(self) -> int:
+        return 1 if self.config.mode == "per-frame" else self.config.window
+
+    @property
+    def overlap(self) -> int:
+        return 0 if self.config.mode == "per-frame" else self.config.overlap
+
+    def problem(self, size: int) -> WindowProblem:
+        """The compiled problem for ``size`` frames (built on first use)."""
+        if size not in self._problems:
+            self._problems[size] = WindowProblem(self.kin, size, self.config.weights, self.config.solver)
+        return self._problems[size]
+
+    def prepare(self, frames: int) -> None:
+        """Build every problem a clip of ``frames`` frames needs (so timing can exclude it)."""
+        self.problem(min(self.window, frames))
+
+    def windows(self, T: int) -> list[tuple[int, int, int]]:
+        """``[(start, stop, commit_stop)]`` for a clip of ``T`` frames."""
+        W, O = self.window, self.overlap
+        if T <= W:
+            return [(0, T, T)]
+        out, s = [], 0
+        while s + W < T:
+            out.append((s, s + W, s + W - O))
+            s += W - O
+        out.append((T - W, T, T))
+        return out
+
+    def run(self, joints: np.ndarray, fps: float, progress: bool | None = None, source: str = "input") -> RetargetResult:
+        """Retarget ``joints[T, 22, 3]`` (metres, z up) sampled at ``fps``."""
+        from tqdm import tqdm
+
+        cfg = self.config
+        joints = validate_joints(joints, source)
+        if not np.isfinite(fps) or fps <= 0:
+            raise InputError(f"{source}: fps must be positive, got {fps}")
+        T = len(joints)
+        contacts = detect_contacts(joints, fps, scaled_contact_config(joints, cfg.contacts))
+        targets = make_targets(joints, self.kin.nominal_sites, self.robot.limb_scale, contacts, scale=cfg.scale, mode=cfg.scaling)
+        K = len(self.robot.keypoints)
+        kp_idx = [JOINT_NAMES.index(k.human_joint) for k in self.robot.keypoints]
+        kp_targets = targets.joints[:, kp_idx, :]  # [T, K, 3]
+        vel_step = self.robot.velocity_limit * cfg.velocity_margin / fps
+
+        x = np.zeros((T, self.kin.nx))
+        known = np.zeros(T, dtype=bool)  # frames with a solved value (committed or look-ahead)
+        reports: list[WindowReport] = []
+        plan = self.windows(T)
+        start_time = time.perf_counter()
+        bar = tqdm(plan, desc=f"retarget {self.robot.name} ({cfg.mode})", unit="window", disable=None if progress is None else not progress)
+        for s, e, commit in bar:
+            prob = self.problem(e - s)
+            x0 = self._warm_start(x, known, s, e, targets, kp_targets)
+            history = x[s - 2 : s] if s >= 2 else (np.stack([x[0], x[0]]) if s == 1 else None)
+            prev_contact = contacts[s - 1] if s >= 1 else None
+            sol = prob.solve(
+                x0, kp_targets[s:e], targets.heading[s:e], targets.foot_dir[s:e], contacts[s:e],
+                history, prev_contact, vel_step, cfg.ground_height,
+            )
+            x[s:e] = sol.x
+            known[s:e] = True
+            violated = None if sol.violated is None else f"frame {s + sol.violated_frame}: {sol.violated}"
+            reports.append(WindowReport(s, e, sol.status, sol.success, sol.iterations, violated, sol.violation, sol.solve_seconds))
+        bar.close()
+        solve_seconds = time.perf_counter() - start_time
+
+        qpos = self.kin.qpos_from_x(x)
+        kp = np.array(self.kin.frame.map(T)(x.T)[0]).reshape(3, K, T, order="F") if K else np.zeros((3, 0, T))
+        kp_err = np.linalg.norm(kp.transpose(2, 1, 0) - kp_targets, axis=-1)
+        return RetargetResult(
+            robot=self.robot.name, fps=float(fps), qpos=qpos, x=x, joint_names=list(self.robot.joint_names),
+            contacts=contacts, keypoint_error=kp_err, keypoint_names=[k.human_joint for k in self.robot.keypoints],
+            targets=targets, source=np.asarray(joints, dtype=np.float32), windows=reports,
+            solve_seconds=solve_seconds, mode=cfg.mode,
+        )
+
+    def _warm_start(self, x, known, s, e, targets: HumanTargets, kp_targets) -> np.ndarray:
+        """Initial guess for frames ``[s, e)``: earlier solutions where they exist, otherwise the
+        last solved frame moved with the human root and heading (or the nominal pose placed on
+        the human root for the first window)."""
+        x0 = np.zeros((e - s, self.kin.nx))
+        root = self._root_track(kp_targets)
+        for i, t in enumerate(range(s, e)):
+            if known[t]:
+                x0[i] = x[t]
+                continue
+            ref = t - 1 if t >= 1 and (known[t - 1] or i > 0) else None
+            if ref is not None:
+                prev = x0[i - 1] if i > 0 else x[ref]
+                x0[i] = prev
+                x0[i, :3] += root[t] - root[ref]
+                x0[i, 3] += targets.heading[t] - targets.heading[ref]
+            else:
+                n = self.kin.nominal_x.copy()
+                offset = n[:3] - self._nominal_root()
+                c, si = np.cos(targets.heading[t]), np.sin(targets.heading[t])
+                rot = np.array([[c, -si, 0], [si, c, 0], [0, 0, 1]])
+                n[:3] = root[t] + rot @ offset
+                n[2] = self.kin.nominal_x[2] + (root[t, 2] - self._nominal_root()[2])
+                n[3] = self.kin.nominal_x[3] + targets.heading[t]
+                x0[i] = n
+        return x0
+
+    def _root_index(self) -> list[int]:
+        names = [k.human_joint for k in self.robot.keypoints]
+        if "pelvis" in names:
+            return [names.index("pelvis")]
+        hips = [names.index(n) for n in ("left_hip", "right_hip") if n in names]
+        return hips or list(range(len(names)))
+
+    def _root_track(self, kp_targets) -> np.ndarray:
+        idx = self._root_index()
+        return kp_targets[:, idx].mean(axis=1) if idx else np.zeros((len(kp_targets), 3))
+
+    def _nominal_root(self) -> np.ndarray:
+        idx = self._root_index()
+        pts = [self.kin.nominal_sites[self.robot.keypoints[i].human_joint] for i in idx]
+        return np.mean(pts, axis=0) if pts else self.kin.nominal_x[:3]
+
+
+def retarget(joints: np.ndarray, fps: float, robot: RetargetRobot, config: RetargetConfig = RetargetConfig(), progress: bool | None = None) -> RetargetResult:
+    """One-shot convenience wrapper around :class:`Retargeter`."""
+    return Retargeter(robot, config).run(joints, fps, progress=progress)
