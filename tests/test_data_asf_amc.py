@@ -78,6 +78,20 @@ def test_cmu_like_pair_gives_upright_body_in_metres(tmp_path):
     np.testing.assert_allclose(clip.joints[-1, 0] - clip.joints[0, 0], [1.0, 0, 0], atol=1e-4)
 
 
+def test_untracked_leading_frames_are_trimmed(tmp_path):
+    asf = tmp_path / "07.asf"
+    asf.write_text(cmu_like_asf())
+    amc = tmp_path / "07_02.amc"
+    amc.write_text(cmu_like_amc(frames=121, untracked_lead=24))
+    skel = asf_amc.read_asf(asf)
+    assert asf_amc.untracked_ends(asf_amc.read_amc(amc, skel)) == (24, 0)
+    clip = asf_amc.load_clip(asf, amc, fps=120.0)
+    assert clip.labels["trimmed_untracked_frames"] == [24, 0]
+    assert clip.joints.shape[0] == 17  # (120 - 24) / 120 s -> 96/6 + 1 frames at 20 fps
+    amc.write_text(cmu_like_amc(frames=121))
+    assert asf_amc.untracked_ends(asf_amc.read_amc(amc, skel)) == (0, 0)
+
+
 def test_amc_errors_name_frame_and_bone(tmp_path):
     asf = tmp_path / "s.asf"
     asf.write_text(cmu_like_asf())
@@ -86,7 +100,7 @@ def test_amc_errors_name_frame_and_bone(tmp_path):
     cases = [
         (good.replace("ltibia 30.0000", "ltibia 30.0000 5", 1), r"frame 0: bone 'ltibia' has 2 values, the ASF declares 1 dof"),
         (good.replace("ltibia 30.0000", "ltibia nan", 1), r"frame 0: bone 'ltibia' has a NaN"),
-        (good.replace("rhumerus 0 0 0", "rtail 0 0 0", 1), r"frame 0: unknown bone 'rtail'"),
+        (good.replace("rhumerus 0.0001 0 0", "rtail 0 0 0", 1), r"frame 0: unknown bone 'rtail'"),
         (good.rsplit("\n", 3)[0] + "\n", r"frame 2: bone '.*' missing \(truncated motion\?\)"),
         (":FULLY-SPECIFIED\n:DEGREES\n", r"AMC has zero frames"),
     ]

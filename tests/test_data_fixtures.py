@@ -147,8 +147,11 @@ def cmu_like_asf(length_scale: float = 0.45) -> str:
     return "\n".join(out) + "\n"
 
 
-def cmu_like_amc(frames: int = 24, knee_deg: float = 30.0, speed: float = 1.0, fps: float = 120.0) -> str:
-    """AMC frames for :func:`cmu_like_asf`: root walking along +z (inches*0.45 units), knees bent."""
+def cmu_like_amc(frames: int = 24, knee_deg: float = 30.0, speed: float = 1.0, fps: float = 120.0,
+                 untracked_lead: int = 0) -> str:
+    """AMC frames for :func:`cmu_like_asf`: root walking along +z (inches*0.45 units), knees bent.
+
+    The first ``untracked_lead`` frames have femurs and humeri exactly 0 (untracked data)."""
     pelvis = skeleton.yup_from_zup(skeleton.rest_pose()[0]) / 0.0254 * 0.45  # y up, forward +z
     out = [":FULLY-SPECIFIED", ":DEGREES"]
     for f in range(frames):
@@ -156,9 +159,10 @@ def cmu_like_amc(frames: int = 24, knee_deg: float = 30.0, speed: float = 1.0, f
         out.append(str(f + 1))
         out.append(f"root {pelvis[0]:.6f} {pelvis[1]:.6f} {z:.6f} 0 0 0")
         for side in "lr":
-            out.append(f"{side}femur {-10.0 * np.sin(f / 10):.4f} 0 0")
+            lost = f < untracked_lead
+            out.append(f"{side}femur 0 0 0" if lost else f"{side}femur {-10.0 * np.sin(f / 10):.4f} 0 0")
             out.append(f"{side}tibia {knee_deg:.4f}")
-            out.append(f"{side}humerus 0 0 0")
+            out.append(f"{side}humerus 0 0 0" if lost else f"{side}humerus 0.0001 0 0")
     return "\n".join(out) + "\n"
 
 

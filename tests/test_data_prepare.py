@@ -262,9 +262,9 @@ def test_prepare_acrnn_uses_readme_frame_rate_and_drops_first_frame(tmp_path):
     out = tmp_path / "out"
     assert _run("--source", f"acrnn={root}", "--out", str(out), "--workers", "1") == 0
     ds = PreparedDataset(out, "all")
-    # 60 frames after dropping frame 0: 59/60 s at 60 fps -> 20 frames at 20 fps; at 120 fps -> 10
-    assert ds.record("acrnn/salsa/01")["frames"] == 20
-    assert ds.record("acrnn/martial/01")["frames"] == 10
+    # 52 frames after the 9-frame lead-in: 51/60 s at 60 fps -> 18 frames at 20 fps; at 120 fps -> 9
+    assert ds.record("acrnn/salsa/01")["frames"] == 18
+    assert ds.record("acrnn/martial/01")["frames"] == 9
     assert any("salsa" in t for t in ds.texts("acrnn/salsa/01"))
     assert ds.record("acrnn/salsa/01")["derived_joints"] == ["spine1"]
     assert "MIT" in ds.record("acrnn/salsa/01")["licence"]

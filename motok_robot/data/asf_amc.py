@@ -361,6 +361,26 @@ CMU_MAP = {
 }
 
 
+def untracked_ends(motion: AmcMotion, min_bones: int = 3) -> tuple[int, int]:
+    """``(lead, trail)``: numbers of leading / trailing frames that are not motion capture.
+
+    A frame counts as untracked when at least ``min_bones`` bones with two or more rotation
+    dof have every value exactly 0 (CMU 03_02 starts with 50 such frames: the whole upper body
+    sits in its rest pose and then jumps 0.7 m in one frame). Exact zeros in all dof of several
+    bones do not happen in tracked data; single-dof joints (knees) at 0 are common and ignored.
+    """
+    flagged = np.zeros(motion.frames, dtype=int)
+    for name, vals in motion.values.items():
+        if name != "root" and vals.shape[1] >= 2:
+            flagged += np.all(vals == 0.0, axis=1)
+    bad = flagged >= min_bones
+    if bad.all() or not bad.any():
+        return 0, 0
+    lead = int(np.argmin(bad))
+    trail = int(np.argmin(bad[::-1]))
+    return lead, trail
+
+
 def load_clip(
     asf_path: str | Path,
     amc_path: str | Path,
@@ -385,10 +405,16 @@ def load_clip(
     """
     skel = read_asf(asf_path, asf_text)
     motion = read_amc(amc_path, skel, amc_text)
+    lead, trail = untracked_ends(motion)
+    if lead or trail:
+        keep = slice(lead, motion.frames - trail)
+        motion = AmcMotion({k: v[keep] for k, v in motion.values.items()}, motion.frames - lead - trail, motion.path)
     positions = forward_kinematics(skel, motion)
     joints, derived = apply_joint_map(positions, joint_map or CMU_MAP, str(amc_path))
     scale = units_to_m if units_to_m is not None else skel.units_to_m
     joints = to_project_frame(joints, scale, zup_rotation(up_axis, forward, str(amc_path)))
     joints = check_joints(resample(joints, fps), str(amc_path))
     cid = clip_id or f"{source}/{Path(str(amc_path)).stem}"
-    return Clip(id=cid, source=source, licence=licence, joints=joints, file=str(amc_path), derived_joints=derived)
+    labels = {"trimmed_untracked_frames": [lead, trail]} if (lead or trail) else {}
+    return Clip(id=cid, source=source, licence=licence, joints=joints, file=str(amc_path), derived_joints=derived,
+                labels=labels)

@@ -44,7 +44,10 @@ LICENCES = {
 #: acRNN genre frame rates from the dataset's readme.txt ("salsa framerate 60"); the BVH
 #: headers all say 120 fps, which makes salsa steps twice too fast (feet step at ~2 Hz).
 ACRNN_DEFAULT_FPS = {"salsa": 60.0, "indian": 120.0, "martial": 120.0}
-ACRNN_GENRE_WORDS = {"salsa": "salsa", "indian": "indian", "martial": "martial"}
+#: every acRNN file starts with the same 9-frame lead-in: frame 0 an unrelated pose (joints
+#: jump 0.4-1.5 m to frame 1), frames 1-8 a blend whose joint speeds (9-24, 4, 0.5, 2, 1 m/s
+#: at the file rate) follow one fixed pattern in all 43 files; real motion starts at frame 9
+ACRNN_LEAD_IN_FRAMES = 9
 
 _BANDAI_RE = re.compile(r"dataset-(\d+)_([a-z-]+?)_([a-z-]+)_(\d+)$")
 
@@ -286,8 +289,9 @@ def run_job(job: Job, options: SourceOptions) -> list[Clip]:
         motion = bvh.read_bvh(job.file, job.contents["bvh"])
         if motion.channels.shape[0] < 3:
             raise InputError(f"{job.file}: only {motion.channels.shape[0]} frames")
-        # frame 0 of every acRNN file is an unrelated pose (joints jump 0.6-1.6 m to frame 1)
-        motion.channels = motion.channels[1:]
+        if motion.channels.shape[0] <= ACRNN_LEAD_IN_FRAMES + 2:
+            raise InputError(f"{job.file}: only {motion.channels.shape[0]} frames (the first {ACRNN_LEAD_IN_FRAMES} are a lead-in)")
+        motion.channels = motion.channels[ACRNN_LEAD_IN_FRAMES:]
         joints, derived = bvh.bvh_to_joints(motion, bvh.ACRNN_MAP, bvh.ACRNN_UNITS_TO_M, bvh.ACRNN_UP, fps=fps)
         cid = f"acrnn/{genre}/{stem}"
         return [
@@ -330,7 +334,8 @@ def run_job(job: Job, options: SourceOptions) -> list[Clip]:
         texts = texts or T.lookup_texts(options.text_index, cid, job.file)
         clip.texts = texts
         # the same CMU trial may also come converted by DeepMimic: one group keeps them in one split
-        clip.labels = {"description": desc, "fps_used": fps, "group": f"cmu/{key}" if (kind == "cmu" and key) else cid}
+        clip.labels = {**clip.labels, "description": desc, "fps_used": fps,
+                       "group": f"cmu/{key}" if (kind == "cmu" and key) else cid}
         return [clip]
     if kind == "deepmimic":
         from motok_robot.data import deepmimic
