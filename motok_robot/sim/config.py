@@ -103,7 +103,8 @@ class ValidationConfig:
     #: per metre of robot height -- the threshold scales with robot size.
     max_base_drift_per_height: float = 0.25
     #: centre of pressure sampling rate in the rollout (Hz); contact forces are read there.
-    cop_rate_hz: float = 25.0
+    #: 20 Hz = the frame rate of the trajectories.
+    cop_rate_hz: float = 20.0
     #: fail when more than this fraction of CoP samples with contact lie outside the support
     #: polygon by more than ``zmp_tolerance_m``.
     max_cop_outside_ratio: float = 0.05

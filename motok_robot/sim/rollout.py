@@ -166,22 +166,25 @@ def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: Validation
     cop = np.full((n_cop, 2), np.nan)
     cop_margin = np.full(n_cop, np.nan)
     hulls = []
-    floor_geoms = set(np.flatnonzero(model.geom_bodyid == 0).tolist())
-    force = np.zeros(6)
+    is_floor = model.geom_bodyid == 0
+    pyramid = model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL
     for s, step in enumerate(cop_step):
         mujoco.mj_setState(model, data, states[step], spec)
         data.ctrl[:] = control[step]
         mujoco.mj_forward(model, data)
         total, weighted = 0.0, np.zeros(2)
-        for i in range(data.ncon):
-            con = data.contact[i]
-            if (con.geom1 in floor_geoms) == (con.geom2 in floor_geoms):
-                continue
-            mujoco.mj_contactForce(model, data, i, force)
-            normal = force[0] * con.frame[2]  # world z of the normal force (frame row 0 = normal)
-            normal = abs(normal)
-            total += normal
-            weighted += normal * con.pos[:2]
+        if data.ncon:
+            contacts = data.contact
+            robot_floor = is_floor[contacts.geom1] != is_floor[contacts.geom2]
+            adr, dim = contacts.efc_address, contacts.dim
+            if pyramid:  # the normal force is the sum of the pyramid facet forces
+                normal = np.array([data.efc_force[a:a + max(1, 2 * (k - 1))].sum() if a >= 0 else 0.0
+                                   for a, k in zip(adr, dim)])
+            else:
+                normal = np.where(adr >= 0, data.efc_force[np.maximum(adr, 0)], 0.0)
+            normal = np.abs(normal * contacts.frame[:, 2]) * robot_floor  # world-vertical part
+            total = float(normal.sum())
+            weighted = normal @ contacts.pos[:, :2]
         corners = data.site_xpos[index.corner_sites]  # [2, 4, 3]
         in_contact = corners[:, :, 2].min(axis=1) < config.contact_height_m
         hull = convex_hull(corners[in_contact].reshape(-1, 3)[:, :2]) if in_contact.any() else np.zeros((0, 2))
