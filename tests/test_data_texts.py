@@ -67,7 +67,9 @@ def test_cmu_descriptions(tmp_path):
     out = T.description_texts("run/jog", "cmu/02_03")
     assert any(t.endswith("runs.") for t in out) and any(t.endswith("jogs.") for t in out)
     assert "Run/jog." in out
-    assert T.description_texts("swordplay", "x") == ["A person performs this motion: swordplay.", "Swordplay."]
+    assert T.description_texts("swordplay", "x") == ["A person performs swordplay.", "Swordplay."]
+    assert T.description_texts("forward jump", "x") == ["A person performs a forward jump.", "Forward jump."]
+    assert T.description_texts("JumpTwist", "x") == ["A person performs a jump twist.", "Jump twist."]
 
 
 def test_deepmimic_and_acrnn_names():

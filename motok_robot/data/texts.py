@@ -151,9 +151,17 @@ def load_cmu_descriptions(csv_path: str | Path) -> dict[str, dict]:
     return out
 
 
+_AFTER_VERB = {"on", "in", "to", "up", "down", "forward", "forwards", "backward", "backwards", "around", "right",
+               "left", "with", "over", "across", "away", "fast", "slowly", "quickly", "in-place", "sideways", "back",
+               "from", "into", "onto", "off", "out", "through", "along", "while", "like", "at", "straight", "normally",
+               "the", "a", "an", "both", "one", "hands", "arms", "legs"}
+
+
 def _conjugate(phrase: str) -> str | None:
+    """Third-person form of a verb phrase ("walk on uneven terrain" -> "walks on uneven terrain"),
+    or None when the phrase does not clearly start with a known verb ("jump twist" is a noun)."""
     words = phrase.split()
-    if not words:
+    if not words or (len(words) > 1 and words[1].lower().strip(",") not in _AFTER_VERB):
         return None
     w = words[0].lower().rstrip(",")
     for base, third in _CMU_VERBS.items():
@@ -166,9 +174,26 @@ def _conjugate(phrase: str) -> str | None:
     return None
 
 
+_COUNTABLE = {"jump", "kick", "punch", "turn", "flip", "cartwheel", "twist", "spin", "roll", "step", "walk", "run",
+              "dance", "hop", "leap", "bow", "wave", "throw", "stretch", "squat", "lunge", "handstand", "somersault"}
+
+
+def _noun_sentence(desc: str) -> str:
+    """"forward jump" -> "A person performs a forward jump."; "swordplay" -> "A person performs swordplay."."""
+    words = desc.split()
+    last = words[-1].lower() if words else ""
+    art = ""
+    if last in _COUNTABLE:
+        art = "an " if desc[0].lower() in "aeiou" else "a "
+    return f"A person performs {art}{desc}."
+
+
 def description_texts(description: str, clip_id: str) -> list[str]:
     """Sentences from a free-form motion description ("run/jog", "walk on uneven terrain")."""
-    desc = re.sub(r"\s+", " ", description.strip().strip("."))
+    desc = re.sub(r"(?<=[a-z])(?=[A-Z])", " ", description.strip())  # "JumpTwist" -> "Jump Twist"
+    desc = re.sub(r"\s+", " ", desc.strip(".").strip())
+    if desc and desc != desc.upper():
+        desc = desc[0] + desc[1:].lower() if " " in desc and desc.split()[0].istitle() else desc
     if not desc:
         return []
     rng = _rng(clip_id)
@@ -181,7 +206,7 @@ def description_texts(description: str, clip_id: str) -> list[str]:
             s = f"{rng.choice(SUBJECTS)} {vp}"
             out.append(s[0].upper() + s[1:] + ".")
     if not out:
-        out.append(f"A person performs this motion: {desc}.")
+        out.append(_noun_sentence(desc[0].lower() + desc[1:]))
     out.append(desc[0].upper() + desc[1:] + ".")
     seen, uniq = set(), []
     for s in out:
