@@ -26,6 +26,7 @@ from motok_robot.eval.protocol import (
     format_table,
     generate_checked,
     run_protocol,
+    sample_clips,
 )
 from motok_robot.eval.sanity import evaluator_sanity, format_sanity, frozen_windows
 
@@ -207,6 +208,11 @@ def test_clips_from_dataset_skips_short_and_uncaptioned_clips():
     clips = clips_from_dataset(Split(), min_frames=40)
     assert [c.clip_id for c in clips] == ["ok", "ok2"] and clips[0].captions == ["a person walks"]
     assert [c.clip_id for c in clips_from_dataset(Split(), 40, max_clips=1)] == ["ok"]
+    # a seeded random subset of usable clips (the reference set for the FID floor)
+    picks = {tuple(c.clip_id for c in sample_clips(Split(), 40, 1, seed=s)) for s in range(12)}
+    assert picks == {("ok",), ("ok2",)}
+    assert sorted(c.clip_id for c in sample_clips(Split(), 40, 5, seed=0)) == ["ok", "ok2"]
+    assert sample_clips(Split(), 40, 1, seed=3)[0].clip_id == sample_clips(Split(), 40, 1, seed=3)[0].clip_id
 
 
 def test_sanity_passes_for_a_matching_evaluator_and_fails_for_a_blind_one():

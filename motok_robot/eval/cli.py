@@ -87,7 +87,7 @@ def _data_and_evaluator_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-clips", type=int, default=None, help="evaluate only the first N usable test clips")
     p.add_argument("--seed", type=int, default=0, help="sampling seed of the protocol (default 0)")
     p.add_argument("--no-train-reference", action="store_true",
-                   help="skip the train split (the reference row's FID is then left empty)")
+                   help="skip the train split (the reference row's FID, test vs as many train clips, is then left empty)")
     p.add_argument("--json", type=Path, default=None, help="also write the results as JSON")
     p.add_argument("--markdown", type=Path, default=None, help="also write the table as markdown")
     p.add_argument("--device", default="cpu", help="torch device (default cpu)")
@@ -164,12 +164,12 @@ def _protocol_config(args: argparse.Namespace):
 
 
 def _load_clips(args: argparse.Namespace, embedder, cfg):
-    from motok_robot.eval.protocol import clips_from_dataset
+    from motok_robot.eval.protocol import clips_from_dataset, sample_clips
 
     test = clips_from_dataset(_load_split(args.data, "test"), embedder.min_frames, cfg.max_clips)
     reference = None
     if not args.no_train_reference:
-        reference = clips_from_dataset(_load_split(args.data, "train"), embedder.min_frames)
+        reference = sample_clips(_load_split(args.data, "train"), embedder.min_frames, len(test), seed=cfg.seed)
     return test, reference
 
 

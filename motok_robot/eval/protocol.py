@@ -7,7 +7,8 @@ Inputs:
   ``embed_motion(list of raw features [T_i, 263]) -> [N, D]``, ``min_frames``, ``max_frames``);
 * ``generators``: ``{row name: GenerateFn}`` where ``GenerateFn(texts, lengths, seed)`` returns
   one raw feature array ``[lengths[i], 263]`` per text (``lengths`` in frames at 20 fps);
-* optionally ``reference_clips`` (the train split) for the reference row's FID.
+* optionally ``reference_clips`` (train-split clips, as many as test clips:
+  :func:`sample_clips`) for the reference row's FID.
 
 Each of ``cfg.repeats`` repeats draws, with its own seed, one caption and one window of
 ``min(T, max_frames)`` frames per test clip (clips shorter than ``min_frames`` or without a
@@ -148,6 +149,19 @@ def clips_from_dataset(dataset, min_frames: int, max_clips: int | None = None) -
         if max_clips is not None and len(out) >= max_clips:
             break
     return out
+
+
+def sample_clips(dataset, min_frames: int, n: int, seed: int = 0) -> list[EvalClip]:
+    """``n`` usable clips of a split in a seeded random order (fewer when the split has fewer):
+    the reference set for the FID floor, as large as the test set so both FIDs have the same
+    sample-size bias. Reads only the clips it keeps."""
+
+    class _Shuffled:
+        clip_ids = [dataset.clip_ids[i] for i in np.random.default_rng(seed).permutation(len(dataset.clip_ids))]
+        features = staticmethod(dataset.features)
+        texts = staticmethod(dataset.texts)
+
+    return clips_from_dataset(_Shuffled(), min_frames, max_clips=n)
 
 
 @dataclass
