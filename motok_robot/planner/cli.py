@@ -27,8 +27,8 @@ def register(commands, groups) -> None:
     train.add_argument("--out", required=True, type=Path, help="run directory to write")
     train.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
     train.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
-    train.add_argument("--steps", type=int, default=None, help="optimiser steps in total (default 20000)")
-    train.add_argument("--batch-size", type=int, default=None, help="clips per batch (default 64)")
+    train.add_argument("--steps", type=int, default=None, help="optimiser steps in total (default 5000)")
+    train.add_argument("--batch-size", type=int, default=None, help="clips per batch (default 32)")
     train.add_argument("--val-every", type=int, default=None, help="steps between validation/checkpoints (default 500)")
     train.add_argument("--text-encoder", default=None, help="'minilm' (default) or 'clip:/path/to/clip'")
     train.add_argument("--config", type=Path, default=None,

@@ -33,7 +33,7 @@ class PlannerConfig:
     downsample: int = 4  #: frames per token, must equal the tokenizer's
     fps: int = 20  #: frames per second of the motion
     max_frames: int = 240  #: longest motion the planner handles, frames (12 s at 20 fps)
-    width: int = 256  #: transformer width
+    width: int = 192  #: transformer width
     layers: int = 4  #: transformer blocks
     heads: int = 4  #: attention heads
     ff_mult: int = 4  #: feed-forward width = ff_mult * width
@@ -93,11 +93,11 @@ class PlannerTrainConfig:
     """Optimisation of a planner (``motok-robot train planner``)."""
 
     seed: int = 0
-    steps: int = 20000  #: optimiser steps in total
-    batch_size: int = 64
+    steps: int = 5000  #: optimiser steps in total
+    batch_size: int = 32
     lr: float = 3e-4
     weight_decay: float = 0.01
-    warmup_steps: int = 500
+    warmup_steps: int = 200
     grad_clip: float = 1.0
     cond_drop_prob: float = 0.1  #: classifier-free guidance: global condition dropped for this fraction
     length_loss_weight: float = 0.1  #: weight of the length estimator's loss
