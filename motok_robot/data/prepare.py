@@ -25,7 +25,8 @@ import shutil
 import sys
 import tempfile
 import time
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from collections import deque
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -273,7 +274,7 @@ def prepare(cfg: PrepareConfig) -> dict:
             st = stats.setdefault(kind, _Stats())
             bar = tqdm(desc=f"{kind}: {Path(path).name}", unit="file", disable=True if cfg.progress is False else None)
             n_jobs = 0
-            pending: set[Future] = set()
+            pending: deque = deque()  # results are handled in file order: deterministic output
             mirror = cfg.mirror
             jobs = S.iter_jobs(kind, path, options)
             for job in jobs:
@@ -288,14 +289,12 @@ def prepare(cfg: PrepareConfig) -> dict:
                     handle(process_job(job, options, mirror), st)
                     bar.update(1)
                     continue
-                pending.add(pool.submit(process_job, job, options, mirror))
+                pending.append(pool.submit(process_job, job, options, mirror))
                 while len(pending) >= 4 * cfg.workers:
-                    done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                    for fut in done:
-                        handle(fut.result(), st)
-                        bar.update(1)
-            for fut in list(pending):
-                handle(fut.result(), st)
+                    handle(pending.popleft().result(), st)
+                    bar.update(1)
+            while pending:
+                handle(pending.popleft().result(), st)
                 bar.update(1)
             bar.close()
     finally:
