@@ -60,6 +60,7 @@ def render_video(result, trajectory, path: str | Path, config=None) -> Path:
     import imageio.v2 as imageio
     import mujoco
     from PIL import Image, ImageDraw
+    from tqdm import tqdm
 
     from motok_robot.sim.config import ValidationConfig
 
@@ -96,7 +97,7 @@ def render_video(result, trajectory, path: str | Path, config=None) -> Path:
                                 macro_block_size=8, ffmpeg_log_level="error")
     lookat = {}
     try:
-        for k in range(n_out):
+        for k in tqdm(range(n_out), desc="render", unit="frame", disable=None, leave=False):
             t = k / config.render_fps
             frame = min(int(round(t * fps_ref)), trajectory.num_frames - 1)
             views = []
