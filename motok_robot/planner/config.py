@@ -100,6 +100,7 @@ class PlannerTrainConfig:
     warmup_steps: int = 200
     grad_clip: float = 1.0
     cond_drop_prob: float = 0.1  #: classifier-free guidance: global condition dropped for this fraction
+    action_prob: float = 0.2  #: clips with both texts and an action label train the action path this often
     length_loss_weight: float = 0.1  #: weight of the length estimator's loss
     val_every: int = 500  #: steps between validation + checkpoint
     val_batches: int = 20

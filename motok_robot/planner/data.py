@@ -166,7 +166,7 @@ class PlannerData:
         rng: np.random.Generator,
         control: ControlConfig | None,
         random_crop: bool = True,
-        action_prob: float = 0.5,
+        action_prob: float = 0.2,
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, Conditions, torch.Tensor]:
         """A training batch.
 

@@ -177,7 +177,8 @@ def train_planner(
         for group in optimiser.param_groups:
             group["lr"] = lr
         idx = rng.integers(0, len(train_data), size=train_cfg.batch_size).tolist()
-        tokens, lengths, ends, cond, full = train_data.batch(idx, rng, train_cfg.control)
+        tokens, lengths, ends, cond, full = train_data.batch(idx, rng, train_cfg.control,
+                                                             action_prob=train_cfg.action_prob)
         cond = cond.to(dev)
         drop = torch.rand(len(idx), generator=generator) < train_cfg.cond_drop_prob
         out_loss = model.loss(tokens.to(dev), lengths.to(dev), cond, generator, drop=drop.to(dev), ends=ends.to(dev))
