@@ -313,3 +313,20 @@ def test_skating_outside_planned_contacts_is_diagnosed_as_low_clearance(tiny):
     details = result.report["checks"]["foot_skate_ratio"]["details"]
     assert details["skate_frames_outside_planned_contact"][1] > 0
     assert "clearance" in details["diagnosis"] and "clearance" in result.summary()
+
+
+def test_deep_squat_is_not_a_fall_because_falls_are_judged_against_the_reference(tiny):
+    result = run(tiny, S.squat(tiny, 3.0, FPS, depth=0.4))
+    assert result.passed, result.summary()
+    start = result.rollout.root_height[0]
+    assert result.rollout.root_height.min() < 0.6 * start  # an absolute height rule would call it a fall
+
+
+def test_motor_actuated_robot_tracks_through_a_pd_servo_law():
+    motors = index_robot(tiny_humanoid(actuator="motor"))
+    assert not motors.actuator_is_position.any()
+    stand = run(motors, S.standing(motors, 1.5, FPS))
+    assert stand.passed, stand.summary()
+    assert stand.report["metrics"]["tracking_rmse_rad"] < 0.02
+    fall = run(motors, S.lift_foot_without_shift(motors, 2.0, FPS))
+    assert "fall" in failed(fall)

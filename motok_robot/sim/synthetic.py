@@ -7,7 +7,7 @@ that move a sole), with the free base prescribed, so the soles are where they ar
 to be to ~1e-6 m.
 
 Clean: :func:`standing`, :func:`walk` (a slow quasi-static walk: weight shift over the
-stance foot in double support, foot lift and swing in single support).
+stance foot in double support, foot lift and swing in single support), :func:`squat`.
 Faults: :func:`sliding_foot` (a foot slides 25 % of the leg length while loaded),
 :func:`sunk_feet` (2 cm into the floor), :func:`leaning` (CoM pushed past the toes and held),
 :func:`over_limit` (an arm joint driven past its range), :func:`too_fast` (an arm joint
@@ -157,6 +157,17 @@ def walk(index: RobotIndex, steps: int = 4, step_period_s: float = 3.2, fps: flo
         feet[moving, swing, 0] = feet0[swing, 0] + start + (goal - start) * s[moving]
         swinging = (time >= t0) & (time <= t1)
         feet[swinging, swing, 2] += lift * np.sin(np.pi * (time[swinging] - t0) / (t1 - t0))
+    return _with_base_and_feet(index, ik, base, feet)
+
+
+def squat(index: RobotIndex, seconds: float = 3.0, fps: float = 20.0, depth: float = 0.4) -> np.ndarray:
+    """Feet planted, the pelvis goes down by ``depth`` x its standing height and back up
+    (a deliberate low root: no fall)."""
+    ik = LegIK(index)
+    time = _frames(seconds, fps)
+    base = np.tile(index.nominal_qpos[:3], (len(time), 1))
+    base[:, 2] -= depth * index.nominal_qpos[2] * np.sin(np.pi * time / seconds) ** 2
+    feet = np.tile(ik.sole_pos0, (len(time), 1, 1))
     return _with_base_and_feet(index, ik, base, feet)
 
 

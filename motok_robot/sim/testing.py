@@ -87,12 +87,18 @@ JOINTS = [f"{s}_{j}" for s in ("left", "right") for j in
 JOINTS += [f"{s}_{j}" for s in ("left", "right") for j in ("shoulder_pitch", "shoulder_roll", "elbow")]
 
 
-def tiny_humanoid_xml() -> str:
+def tiny_humanoid_xml(actuator: str = "position") -> str:
+    """The MJCF text; ``actuator`` "position" (servos) or "motor" (torque motors, gear 1)."""
     legs = "".join(_LEG.format(s=s, y=y) for s, y in (("left", 0.045), ("right", -0.045)))
     arms = "".join(_ARM.format(s=s, y=y, dy=dy, roll=roll) for s, y, dy, roll in
                    (("left", 0.075, 0.02, "-0.2 1.6"), ("right", -0.075, -0.02, "-1.6 0.2")))
-    actuators = "\n    ".join(f'<position name="{j}" joint="{j}" ctrlrange="-3.2 3.2"/>' for j in JOINTS)
-    return _XML.format(legs=legs, arms=arms, actuators=actuators)
+    if actuator == "position":
+        lines = [f'<position name="{j}" joint="{j}" ctrlrange="-3.2 3.2"/>' for j in JOINTS]
+    elif actuator == "motor":
+        lines = [f'<motor name="{j}" joint="{j}" ctrlrange="-3 3" ctrllimited="true"/>' for j in JOINTS]
+    else:
+        raise ValueError(f"actuator must be 'position' or 'motor', got {actuator!r}")
+    return _XML.format(legs=legs, arms=arms, actuators="\n    ".join(lines))
 
 
 @dataclass
@@ -123,9 +129,12 @@ class TinyHumanoid:
         return self._nominal.copy()
 
 
-def tiny_humanoid(torque_limit: float = 3.0) -> TinyHumanoid:
-    """Build the tiny humanoid; knees bent 0.6 rad, soles flat on the floor at the nominal pose."""
-    model = mujoco.MjModel.from_xml_string(tiny_humanoid_xml())
+def tiny_humanoid(torque_limit: float = 3.0, actuator: str = "position") -> TinyHumanoid:
+    """Build the tiny humanoid; knees bent 0.6 rad, soles flat on the floor at the nominal pose.
+
+    ``actuator="motor"`` gives torque motors limited to +-3 N m (the rollout then wraps them
+    in a PD servo law)."""
+    model = mujoco.MjModel.from_xml_string(tiny_humanoid_xml(actuator))
     ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in JOINTS]
     qpos_adr = model.jnt_qposadr[ids].copy()
     dof_adr = model.jnt_dofadr[ids].copy()
