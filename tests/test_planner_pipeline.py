@@ -108,6 +108,19 @@ def test_train_writes_a_resumable_safetensors_run(runs, capsys):
     assert [int(r["step"]) for r in _metrics(run)] == [2, 4, 6]
 
 
+def test_resumed_training_equals_uninterrupted_training(runs, tmp_path):
+    base = ["train", "planner", "--data", str(runs / "data"), "--tokenizer", str(runs / "tok"), "--kind", "masked",
+            "--val-every", "2", "--seed", "5", "--config", str(runs / "tiny.json")]
+    assert main(base + ["--out", str(tmp_path / "straight"), "--steps", "4"]) == 0
+    assert main(base + ["--out", str(tmp_path / "split"), "--steps", "2"]) == 0
+    assert main(base + ["--out", str(tmp_path / "split"), "--steps", "4", "--resume"]) == 0
+    from safetensors.torch import load_file
+
+    a = load_file(str(tmp_path / "straight" / "model.safetensors"))
+    b = load_file(str(tmp_path / "split" / "model.safetensors"))
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
 def test_training_is_seeded(runs, tmp_path):
     args = ["train", "planner", "--data", str(runs / "data"), "--tokenizer", str(runs / "tok"), "--kind", "ar",
             "--out", str(tmp_path / "again"), "--steps", "4", "--val-every", "2", "--seed", "1",

@@ -160,6 +160,8 @@ def train_planner(
         step, extra_t = load_training_state(ckpt, model, optimiser)
         if "torch_rng" in extra_t:
             generator.set_state(extra_t["torch_rng"].to(torch.uint8))
+        if "global_rng" in extra_t:  # dropout draws from the global generator
+            torch.set_rng_state(extra_t["global_rng"].to(torch.uint8))
         state = json.loads((out / STATE_FILE).read_text()) if (out / STATE_FILE).is_file() else {}
         if "numpy_rng" in state:
             rng.bit_generator.state = state["numpy_rng"]
@@ -205,7 +207,8 @@ def train_planner(
                 csv.writer(fh).writerow([f"{row[k]:.6g}" if isinstance(row[k], float) else row[k] for k in METRIC_FIELDS])
             running_loss, running_acc, running_n = 0.0, 0.0, 0
             save_planner_weights(model, out)
-            save_training_state(ckpt, model, optimiser, step, extra={"torch_rng": generator.get_state()})
+            save_training_state(ckpt, model, optimiser, step, extra={"torch_rng": generator.get_state(),
+                                                                           "global_rng": torch.get_rng_state()})
             atomic_write_text(out / STATE_FILE, json.dumps({"numpy_rng": rng.bit_generator.state, "step": step}))
             bar.write(f"step {step}: val loss {metrics['val_loss']:.4f}, token accuracy {metrics['val_accuracy']:.3f}")
     bar.close()
