@@ -43,7 +43,7 @@ class CostWeights:
     heading: float = 1.0  # (base yaw - human heading)^2
     foot_yaw: float = 1.0  # |sole forward axis (xy) - human foot direction (xy)|^2, per foot
     velocity: float = 0.05  # |q[t+1] - q[t]|^2 (base position in leg lengths, angles in rad)
-    acceleration: float = 0.5  # |q[t+1] - 2 q[t] + q[t-1]|^2
+    acceleration: float = 5.0  # |q[t+1] - 2 q[t] + q[t-1]|^2
     nominal: float = 0.01  # |joints - nominal joints|^2
     base_tilt: float = 0.1  # (pitch^2 + roll^2) of the base: keeps the torso upright when unobserved
     com: float = 0.0  # soft: horizontal CoM distance to the support centre (leg lengths)^2, in contact frames

@@ -134,6 +134,12 @@ def robot() -> RetargetRobot:
     return toy_robot()
 
 
+@pytest.fixture(scope="module")
+def small(robot) -> Retargeter:
+    """One retargeter with short windows, shared (its problems are built once)."""
+    return Retargeter(robot, SMALL)
+
+
 def sites_to_human(robot: RetargetRobot, qpos: np.ndarray) -> np.ndarray:
     """Human joints [T, 22, 3] whose mapped joints are the robot's keypoint sites (others interpolated)."""
     data = mujoco.MjData(robot.model)
@@ -269,9 +275,9 @@ def test_self_retarget_recovers_robot_motion(robot):
     assert np.abs(res.qpos[:, robot.qpos_adr] - qpos[:, robot.qpos_adr]).max() < 0.05
 
 
-def test_synthetic_walk_contacts_hold_and_limits_respected(robot):
+def test_synthetic_walk_contacts_hold_and_limits_respected(robot, small):
     human = synthetic_walk(T=60)
-    rt = Retargeter(robot, SMALL)
+    rt = small
     res = rt.run(human, 20.0, progress=False)
     assert res.success, res.solver_status()
     assert res.contacts[:, 0].any() and res.contacts[:, 1].any()
@@ -303,9 +309,9 @@ def test_fast_motion_is_clamped_to_limits(robot):
     assert m.sole_min_height >= -1e-3
 
 
-def test_per_frame_baseline_is_rougher_than_trajectory(robot):
+def test_per_frame_baseline_is_rougher_than_trajectory(robot, small):
     human = synthetic_walk(T=40)
-    traj = Retargeter(robot, SMALL)
+    traj = small
     per_frame = Retargeter(robot, replace(SMALL, mode="per-frame"))
     a = traj.run(human, 20.0, progress=False)
     b = per_frame.run(human, 20.0, progress=False)
@@ -337,8 +343,8 @@ def test_non_converged_window_names_the_violated_constraint(robot):
     assert any(k in w.violated for k in ("sole", "velocity", "bound"))
 
 
-def test_bad_input_errors_name_the_problem(robot, tmp_path):
-    rt = Retargeter(robot, SMALL)
+def test_bad_input_errors_name_the_problem(robot, small, tmp_path):
+    rt = small
     j = synthetic_walk(T=10)
     j[4, JOINT_INDEX["left_knee"], 1] = np.nan
     with pytest.raises(InputError, match=r"frame 4.*left_knee"):
@@ -368,9 +374,9 @@ def test_unknown_robot_is_named():
         load_robot("no_such_robot")
 
 
-def test_robot_npz_round_trip(robot, tmp_path):
+def test_robot_npz_round_trip(robot, small, tmp_path):
     human = synthetic_walk(T=20)
-    res = Retargeter(robot, SMALL).run(human, 20.0, progress=False)
+    res = small.run(human, 20.0, progress=False)
     path = write_robot_npz(tmp_path / "robot.npz", res)
     back = read_robot_npz(path)
     assert back.qpos.shape == (20, robot.nq) and back.qpos.dtype == np.float64
@@ -385,10 +391,10 @@ def test_robot_npz_round_trip(robot, tmp_path):
         assert json.loads(str(raw["solver_status"]))[0]["start"] == 0
 
 
-def test_quaternion_output_matches_solver_orientation(robot):
+def test_quaternion_output_matches_solver_orientation(robot, small):
     """qpos quaternions put the robot where the solver variables say (MuJoCo FK on the output)."""
     human = synthetic_walk(T=20)
-    rt = Retargeter(robot, SMALL)
+    rt = small
     res = rt.run(human, 20.0, progress=False)
     data = mujoco.MjData(robot.model)
     sid = mujoco.mj_name2id(robot.model, mujoco.mjtObj.mjOBJ_SITE, "l_hand")
