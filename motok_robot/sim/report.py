@@ -306,8 +306,8 @@ def frame_ranges(frames: list[int], limit: int = 4) -> str:
     return text + (", ..." if len(ranges) > limit else "")
 
 
-def _format_value(check: dict) -> str:
-    value = check["value"]
+def _format_value(check: dict, key: str = "value") -> str:
+    value = check[key]
     if isinstance(value, bool) or value is None:
         return str(value)
     if isinstance(value, int):
@@ -336,7 +336,7 @@ def summary_text(report: dict) -> str:
         if key == "fall" and ch["details"].get("fall_time_s") is not None:
             extra = f" at {ch['details']['fall_time_s']:.2f} s ({ch['details']['reason']})"
         frames = frame_ranges(ch["frames"])
-        lines.append(f"  FAILED {key}: {_format_value(ch)} (must be {ch['comparison']} {ch['threshold']}){extra}"
+        lines.append(f"  FAILED {key}: {_format_value(ch)} (must be {ch['comparison']} {_format_value(ch, 'threshold')}){extra}"
                      + (f"; frames {frames}" if frames else ""))
     return "\n".join(lines)
 
