@@ -286,6 +286,41 @@ def test_hardware_playback_is_refused_without_a_passing_report(runs, tmp_path, m
     assert (tmp_path / "hw" / "report.json").is_file() and not res.ok
 
 
+def test_forced_hardware_playback_streams_to_the_port(runs, pipe, tmp_path, monkeypatch):
+    """--port --force with a failing report: the streamer runs on the port (here an emulated chain
+    behind the real DynamixelBus), in real time, and the run says it was forced."""
+    import motok_robot.servo.bus as bus_module
+    from motok_robot.robots import load
+    from motok_robot.servo.convert import ServoMap
+    from motok_robot.servo.emulator import emulated_chain
+    from motok_robot.servo.streamer import PlaybackWarning
+
+    original = bus_module.DynamixelBus.__init__
+    ports = []
+
+    def on_emulated_port(self, port, baud=2_000_000, **kwargs):
+        ports.append(port)
+        chain = emulated_chain(ServoMap.from_specs(load("op3_like").servos), baud=baud)
+        original(self, port, baud, port_handler=chain)
+
+    monkeypatch.setattr(bus_module.DynamixelBus, "__init__", on_emulated_port)
+    from motok_robot.pipeline import Pipeline
+    from motok_robot.servo.config import PlaybackConfig
+    from motok_robot.sim.config import ValidationConfig
+
+    strict = ValidationConfig().with_overrides(["max_velocity_ratio=0.0"])  # nothing can pass this
+    forced = Pipeline(tokenizer_run=runs / "tok", planner_run=runs / "masked", validation=strict, plots=False,
+                      playback=PlaybackConfig(ramp_s=0.2))
+    with pytest.warns(PlaybackWarning, match="WITHOUT a passing validation report"):
+        res = forced.run("a person walks forward", seconds=0.8, out_dir=tmp_path / "hw", playback="port",
+                         port="/dev/null", force=True, render=False)
+    assert ports == ["/dev/null"] and not res.passed
+    assert res.playback.status == "completed" and res.playback.forced and "[simulated time]" not in res.playback.line
+    assert any("FORCED" in n for n in res.notes) and "FORCED" in (tmp_path / "hw" / "summary.md").read_text()
+    with open(res.files["playback_log"], newline="") as fh:
+        assert len(list(csv.DictReader(fh))) == 25 + 94  # 0.2 s ramp + frames 0..15 (0.75 s) at 125 Hz
+
+
 def test_sim_playback(pipe, tmp_path):
     res = pipe.run("a person walks forward", seconds=SECONDS, seed=2, out_dir=tmp_path / "sim", playback="sim",
                    render=False)
@@ -320,6 +355,34 @@ def test_cli_run_prints_summary(runs, tmp_path, capsys):
     assert printed.startswith("PASS" if result["passed"] else "FAIL")
     assert re.search(r"generate \d+\.\d\d s \| retarget \d+\.\d\d s \| validate \d+\.\d\d s", printed)
     assert "playback (dry-run): completed" in printed and str(out / "summary.md") in printed
+
+
+def test_cli_constraint_options_reach_controlled_generation(runs, tmp_path, capsys):
+    pytest.importorskip("motok_robot.control.generate")
+    path = tmp_path / "path.csv"
+    path.write_text("frame,x,y\n" + "".join(f"{f},{0.03 * f:.3f},0.0\n" for f in range(32)))
+    out = tmp_path / "ctrl"
+    code = main(["run", "a person walks forward", "--seconds", str(SECONDS), "--trajectory", str(path),
+                 "--no-render", "--no-plots", "--out", str(out)] + _model_args(runs))
+    assert code in (0, 1), capsys.readouterr().err
+    with np.load(out / "motion.npz") as z:
+        assert z["joints"].shape[0] == 32
+    # a constraint file that does not fit the clip is an input error before any work
+    bad = tmp_path / "late.csv"
+    bad.write_text("frame,x,y\n0,0,0\n40,1,0\n")
+    assert main(["run", "a person walks forward", "--seconds", str(SECONDS), "--trajectory", str(bad),
+                 "--out", str(tmp_path / "bad")] + _model_args(runs)) == 2
+    err = capsys.readouterr().err.strip()
+    assert "frame 40 is out of range" in err and "\n" not in err
+    assert not (tmp_path / "bad").exists() and not (tmp_path / "bad.failed").exists()
+
+
+def test_api_constraints_must_match_seconds(pipe, tmp_path):
+    from motok_robot.control.constraints import Constraints
+
+    with pytest.raises(InputError, match="constraints are laid on 40 frames"):
+        pipe.run("a person walks forward", seconds=SECONDS, constraints=Constraints(40), out_dir=tmp_path / "x")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_prompts_file_runs_a_list_and_writes_summary_csv(runs, tmp_path, capsys):
