@@ -102,17 +102,18 @@ def machine_summary(machine: dict[str, Any]) -> str:
     """One line: ``CPU, N usable cores (of M), R GB RAM, load a/b/c, torch x, mujoco y, commit``."""
     v = machine.get("versions", {})
     load = machine.get("load_average_1_5_15")
-    parts = [
-        str(machine.get("cpu")),
-        f"{machine.get('usable_cores')} usable cores (of {machine.get('logical_cores')})",
-        f"{machine.get('ram_gb')} GB RAM",
-    ]
+    parts = [str(machine.get("cpu"))]
+    if machine.get("usable_cores") is not None:
+        parts.append(f"{machine['usable_cores']} usable cores (of {machine.get('logical_cores')})")
+    if machine.get("ram_gb") is not None:
+        parts.append(f"{machine['ram_gb']} GB RAM")
     if machine.get("gpu"):
         parts.append(str(machine["gpu"]))
     if load:
         parts.append("load " + "/".join(f"{x:g}" for x in load))
     parts += [f"{k} {v[k]}" for k in ("torch", "mujoco", "casadi") if v.get(k)]
-    parts.append(f"python {machine.get('python')}")
+    if machine.get("python"):
+        parts.append(f"python {machine['python']}")
     if machine.get("commit"):
         parts.append(f"commit {machine['commit'][:10]}{' (dirty)' if machine.get('dirty') else ''}")
     return ", ".join(parts)

@@ -1,0 +1,103 @@
+"""The shared benchmark helpers (benchmarks/common.py) and bench_all's planning and report."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
+sys.path.insert(0, str(BENCH))
+
+import bench_all  # noqa: E402
+import common  # noqa: E402
+
+
+def test_machine_description_names_the_hardware_and_versions():
+    m = common.machine_description(threads=2)
+    for key in ("cpu", "logical_cores", "usable_cores", "ram_gb", "python", "versions", "commit", "date_utc"):
+        assert key in m, key
+    assert m["threads"] == 2 and m["logical_cores"] >= 1 and m["versions"]["numpy"] == np.__version__
+    line = common.machine_summary(m)
+    assert str(m["cpu"]) in line and "usable cores" in line
+
+
+def test_time_median_runs_the_function_the_requested_number_of_times():
+    calls = []
+
+    def work():
+        calls.append(1)
+        time.sleep(0.002)
+
+    t = common.time_median(work, repeat=5, warmup=2)
+    assert len(calls) == 7 and len(t["runs_s"]) == 5
+    assert t["min_s"] <= t["median_s"] <= t["max_s"] and t["median_s"] >= 0.002
+    assert t["cpu_median_s"] < t["median_s"]  # sleeping costs no CPU
+    with pytest.raises(ValueError):
+        common.time_median(work, repeat=0)
+
+
+def test_peak_memory_sees_a_large_allocation():
+    def allocate():
+        block = np.ones(40 * 2**20 // 8)  # 40 MB
+        time.sleep(0.05)
+        return float(block[-1])
+
+    value, mem = common.measure_peak_memory(allocate, python_heap=True)
+    assert value == 1.0
+    assert mem["rss_increase_mb"] > 30 and mem["rss_peak_mb"] >= mem["rss_increase_mb"]
+    assert mem["python_peak_mb"] > 30  # numpy buffers are traced by tracemalloc
+    assert common.max_rss_mb() >= mem["rss_increase_mb"]
+
+
+def test_markdown_table_and_cells():
+    rows = [{"name": "a|b", "ms": 1234.5, "ratio": 0.123456, "tiny": 1.5e-6, "ok": True, "nested": {"x": 1}},
+            {"name": "c", "ms": 2.0, "ratio": None, "tiny": 0.0, "ok": False}]
+    table = common.markdown_table(rows)
+    lines = table.splitlines()
+    assert lines[0] == "| name | ms | ratio | tiny | ok |"  # nested dicts are left out
+    assert lines[1] == "|---|---:|---:|---:|---|"
+    assert lines[2] == "| a\\|b | 1,234 | 0.1235 | 1.5e-06 | yes |"
+    assert lines[3] == "| c | 2.00 | - | 0 | no |"
+    assert common.markdown_table([]) == "(no rows)"
+
+
+def test_write_json_adds_the_machine(tmp_path):
+    path = common.write_json(tmp_path / "sub" / "r.json", {"rows": [{"a": np.float32(1.5)}], "arr": np.arange(3)})
+    data = json.loads(path.read_text())
+    assert data["arr"] == [0, 1, 2] and data["rows"][0]["a"] == 1.5 and "cpu" in data["machine"]
+
+
+def test_bench_all_plans_runs_and_reports(tmp_path, monkeypatch):
+    scripts = tmp_path / "benchmarks"
+    scripts.mkdir()
+    (scripts / "fast.py").write_text(
+        "import argparse, json\n"
+        "p = argparse.ArgumentParser(); p.add_argument('--out'); a = p.parse_args()\n"
+        "print('| what | ms |'); print('written', a.out)\n"
+        "json.dump({'benchmark': 'fast', 'rows': [{'what': 'x', 'ms': 1.5}], 'machine': {'cpu': 'toy'}}, open(a.out, 'w'))\n")
+    (scripts / "needs_data.py").write_text(
+        "import argparse\np = argparse.ArgumentParser(); p.add_argument('dataset'); p.add_argument('--json')\np.parse_args()\n")
+    (scripts / "broken.py").write_text("import sys\nprint('about to fail')\nsys.exit(3)\n")
+    monkeypatch.setattr(bench_all, "REPO_ROOT", tmp_path)
+    found = sorted(scripts.glob("*.py"))
+    invocations = {i.name: i for i in bench_all.plan(found, tmp_path / "results", data=None)}
+    assert invocations["fast"].args == ["--out", str(tmp_path / "results" / "fast.json")]
+    assert invocations["needs_data"].skip_reason and "--data" in invocations["needs_data"].skip_reason
+    assert invocations["broken"].args == []
+    with_data = {i.name: i for i in bench_all.plan(found, tmp_path / "results", data=Path("/d"))}
+    assert with_data["needs_data"].args == ["/d", "--json", str(tmp_path / "results" / "needs_data.json")]
+    (tmp_path / "results").mkdir()
+    outcomes = [bench_all.run(i, timeout=120) for i in invocations.values()]
+    status = {o.invocation.name: o.status for o in outcomes}
+    assert status["fast"] == "ok" and status["broken"] == "failed (exit 3)" and status["needs_data"].startswith("skipped")
+    report = tmp_path / "RESULTS.md"
+    bench_all.write_report(outcomes, report, tmp_path / "results", "python benchmarks/bench_all.py")
+    text = report.read_text()
+    assert "Measured on:" in text and "| fast | ok |" in text and "| broken | failed (exit 3) |" in text
+    assert "| what | ms |\n|---|---:|\n| x | 1.50 |" in text and "Machine: toy" in text
+    assert "about to fail" in text
