@@ -637,6 +637,7 @@ class Pipeline:
             check_validation_report(files["robot"], files["report"], force=False, robot_name=robot.name)
         except InputError as exc:
             gate = str(exc).split("refusing to play: ", 1)[-1].split(". Validate it first", 1)[0]
+            gate = gate.replace(str(tmp) + os.sep, "")  # name files relative to the output folder
         summary = PlaybackSummary(mode=mode, status="completed", gate=gate)
         if not robot.servos:
             summary.status = "skipped"
@@ -694,6 +695,10 @@ class Pipeline:
         for key, path in (("playback_log", log_path), ("playback_stats", log_path.with_name("playback.stats.json"))):
             if path.is_file():
                 files[key] = path
+        if "playback_stats" in files:  # the streamer records the log's (temporary) absolute path
+            stats = json.loads(files["playback_stats"].read_text(encoding="utf-8"))
+            stats["log_path"] = log_path.name
+            files["playback_stats"].write_text(json.dumps(stats, indent=2) + "\n", encoding="utf-8")
         if rig is not None:
             summary.fell = bool(rig.fell)
             summary.line += (f"; simulated robot {'FELL' if rig.fell else 'stayed upright'} "

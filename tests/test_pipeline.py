@@ -147,6 +147,8 @@ def test_run_writes_every_file_and_they_parse(full_run):
     assert len(rows) == stats["ticks"] > 125 * SECONDS  # ramp + the whole clip at the bus rate
     assert {r["phase"] for r in rows} == {"ramp", "play"}
 
+    for name in ("pipeline.json", "report.json", "playback.stats.json"):
+        assert ".partial-" not in (out / name).read_text(), name  # nothing points into the temporary folder
     saved = json.loads((out / "pipeline.json").read_text())
     assert saved["passed"] == result.passed and saved["files"]["robot"] == "robot.npz"
     for stage in ("generate", "retarget", "validate", "plots", "playback", "total"):
@@ -170,7 +172,8 @@ def test_summary_md_links_every_file_with_verdict_and_times(full_run):
     for check in result.failed_checks:
         assert f"`{check}`" in text
     if not result.passed:
-        assert "Hardware playback would be refused" in text
+        assert "Hardware playback would be refused: validation report report.json did not pass" in text
+    assert ".partial-" not in text and str(out.parent) not in text  # no temporary or absolute paths
 
 
 # ----------------------------------------------------------------------------- invalid input
