@@ -110,8 +110,8 @@ class ValidationConfig:
     #: polygon by more than ``zmp_tolerance_m``.
     max_cop_outside_ratio: float = 0.05
     #: physics timestep (s) of the rollout; 0 keeps the robot model's own ``opt.timestep``.
-    #: 4 ms (250 Hz, twice the 125 Hz servo bus cycle) halves the cost of the usual 2 ms; the
-    #: standing and fault results of both shipped robots are the same at 2 and 4 ms (see
+    #: 4 ms (250 Hz, twice the 125 Hz servo bus cycle) halves the cost of the usual 2 ms; seven
+    #: clean and fault clips give the same verdicts on both shipped robots at 2 and 4 ms (see
     #: docs/validation.md).  Set 0 for the model's own step.
     physics_timestep_s: float = 0.004
     #: proportional gain (N m / rad per N m of force limit) of the software PD used only for
