@@ -103,6 +103,41 @@ def run_clip(retargeter, joints, fps):
     return res, m, cpu
 
 
+def _speed_worker(robot_name, clips, barrier, queue):
+    """One process: build the problem, wait for the others, then time its share of the clips."""
+    from retarget.config import RetargetConfig
+    from retarget.robot_model import load_robot
+    from retarget.solve import Retargeter
+
+    rt = Retargeter(load_robot(robot_name), RetargetConfig())
+    rt.prepare(200)
+    barrier.wait()
+    t0, c0 = time.perf_counter(), time.process_time()
+    frames = 0
+    for joints, fps in clips:
+        rt.run(joints, fps, progress=False)
+        frames += len(joints)
+    queue.put((frames, time.perf_counter() - t0, time.process_time() - c0))
+
+
+def parallel_speed(robot_name, clips, workers: int) -> dict:
+    """Aggregate frames/s of ``workers`` processes (one per core) sharing the clips; construction excluded."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    barrier, queue = ctx.Barrier(workers), ctx.Queue()
+    shares = [clips[i::workers] for i in range(workers)]
+    procs = [ctx.Process(target=_speed_worker, args=(robot_name, sh, barrier, queue)) for sh in shares]
+    for p in procs:
+        p.start()
+    results = [queue.get() for _ in procs]
+    for p in procs:
+        p.join()
+    frames = sum(r[0] for r in results)
+    return {"workers": workers, "frames": frames, "fps_wall": frames / max(r[1] for r in results),
+            "fps_cpu_per_worker": [r[0] / r[2] for r in results]}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=None)
@@ -110,6 +145,7 @@ def main(argv=None) -> int:
     ap.add_argument("--robots", nargs="+", default=["op3_like", "humanoid25"])
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "retarget.json")
     ap.add_argument("--no-baseline", action="store_true", help="skip the per-frame IK baseline")
+    ap.add_argument("--workers", type=int, default=2, help="processes for the aggregate 10 s-clip throughput (default 2 = 2 cores)")
     args = ap.parse_args(argv)
 
     clips = find_clips(args.data, args.max_clips)
@@ -181,7 +217,11 @@ def main(argv=None) -> int:
                 "fps_wall": frames / sum(walls), "fps_cpu": frames / sum(cpus),
                 "load_average_after": os.getloadavg(),
             }
-            print(f"  10 s clips ({len(long)}): {frames / sum(walls):.0f} frames/s wall, {frames / sum(cpus):.0f} frames/s CPU (1 core)")
+            print(f"  10 s clips ({len(long)}): {frames / sum(walls):.0f} frames/s wall, {frames / sum(cpus):.0f} frames/s CPU (1 process)")
+            if args.workers > 1:
+                par = parallel_speed(robot_name, [(j, f) for _, j, f in long] * 2, args.workers)
+                report["speed_10s"][robot_name]["parallel"] = par
+                print(f"  10 s clips, {args.workers} processes: {par['fps_wall']:.0f} frames/s wall (aggregate)")
 
     for robot_name in args.robots:
         rs = [r for r in rows if r["robot"] == robot_name]
@@ -210,7 +250,7 @@ def main(argv=None) -> int:
         report["summary"][robot_name] = s
 
     print("\nsummary")
-    header = f"{'robot':12s} {'clips':>5s} {'kp cm':>6s} {'worst clip':>10s} {'drift mm':>8s} {'min z mm':>8s} {'range+':>8s} {'vel/lim':>7s} {'acc':>6s} {'acc pf':>6s} {'fps wall':>8s} {'fps cpu':>7s} {'10s wall':>8s} {'10s cpu':>7s}"
+    header = f"{'robot':12s} {'clips':>5s} {'kp cm':>6s} {'worst clip':>10s} {'drift mm':>8s} {'min z mm':>8s} {'range+':>8s} {'vel/lim':>7s} {'acc':>6s} {'acc pf':>6s} {'fps wall':>8s} {'fps cpu':>7s} {'10s wall':>8s} {'10s cpu':>7s} {'10s par':>7s}"
     print(header)
     for robot_name, s in report["summary"].items():
         sp = report["speed_10s"].get(robot_name, {})
@@ -218,7 +258,8 @@ def main(argv=None) -> int:
             f"{robot_name:12s} {s['clips']:5d} {s['keypoint_error_mean_cm']:6.2f} {s['keypoint_error_max_clip_cm']:10.2f} {s['sole_drift_max_mm']:8.4f} "
             f"{s['sole_min_height_mm']:8.4f} {s['joint_range_excess_max_rad']:8.1e} {s['velocity_ratio_max']:7.3f} {s['joint_acceleration_mean']:6.1f} "
             f"{s.get('per_frame_joint_acceleration_mean', float('nan')):6.1f} {s['fps_wall_all_clips']:8.0f} {s['fps_cpu_all_clips']:7.0f} "
-            f"{sp.get('fps_wall', float('nan')):8.0f} {sp.get('fps_cpu', float('nan')):7.0f}"
+            f"{sp.get('fps_wall', float('nan')):8.0f} {sp.get('fps_cpu', float('nan')):7.0f} "
+            f"{sp.get('parallel', {}).get('fps_wall', float('nan')):7.0f}"
         )
     report["machine"]["load_average_at_end"] = os.getloadavg()
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -51,13 +51,18 @@ def run(args: argparse.Namespace) -> int:
     )
     motion = read_input(args.input, skeleton=args.skeleton, asf=args.asf)
     robot = load_robot(args.robot)
+    import time
+
+    t0 = time.perf_counter()
     retargeter = Retargeter(robot, config)
+    retargeter.prepare(len(motion.joints))
+    build = time.perf_counter() - t0
     result = retargeter.run(motion.joints, motion.fps, source=motion.name)
     m = measure(retargeter.kin, result.x, result.contacts, result.keypoint_error, result.fps, config.ground_height)
     failed = result.failed_windows()
     print(
-        f"{robot.name}: {m.frames} frames, {len(result.windows)} windows ({config.mode}), solved in {result.solve_seconds:.2f} s "
-        f"({m.frames / max(result.solve_seconds, 1e-9):.0f} frames/s)\n"
+        f"{robot.name}: {m.frames} frames, {len(result.windows)} windows ({config.mode}), problem built in {build:.1f} s, "
+        f"solved in {result.solve_seconds:.2f} s ({m.frames / max(result.solve_seconds, 1e-9):.0f} frames/s)\n"
         f"  keypoint error mean {m.keypoint_error_mean * 100:.2f} cm; {m.contact_phases} contact phases, sole drift max "
         f"{m.sole_drift_max * 1000:.2f} mm, lowest sole corner {m.sole_min_height * 1000:.2f} mm\n"
         f"  joint range excess {m.joint_range_excess:.2e} rad, max velocity {m.velocity_ratio_max * 100:.0f}% of limit, "
