@@ -107,9 +107,13 @@ def test_dead_code_is_restarted_near_the_data():
     for _ in range(4):
         vq(data, gen)
     assert int(vq.restarts) > before
-    nearest_data = (data.reshape(-1, 4) - vq.codebook[3]).norm(dim=1).min()
-    assert nearest_data < 0.1, "the restarted code sits on an encoder output"
+    assert float(vq.codebook[3].abs().max()) < 5.0, "the unused far-away code was moved back to the data"
     assert float(vq.ema_count[3]) > 0
+    # directly: a dead code lands on (a jittered copy of) one of the given encoder outputs
+    with torch.no_grad():
+        vq.ema_count[5] = 0.0
+    assert vq.restart_dead_codes(data.reshape(-1, 4), gen) >= 1
+    assert float((data.reshape(-1, 4) - vq.codebook[5]).norm(dim=1).min()) < 0.05
 
 
 def test_quantizer_straight_through_and_commitment():
@@ -277,3 +281,20 @@ def test_resume_equals_uninterrupted_training(tmp_path):
     assert again["steps"] == 6
     c = load_file(str(tmp_path / "again" / "model.safetensors"))
     assert all(torch.equal(a[k], c[k]) for k in a)
+
+
+def test_window_sampler_pads_short_clips_and_weights_by_length():
+    from motok_robot.tokenizer.train import WindowSampler
+
+    short = np.arange(10 * 263, dtype=np.float32).reshape(10, 263)
+    long = -np.ones((100, 263), dtype=np.float32)
+    tiny_clip = np.zeros((3, 263), dtype=np.float32)
+    sampler = WindowSampler(Clips(["s", "l", "t"], [short, long, tiny_clip]), window=32, min_frames=8)
+    assert sampler.skipped == 1 and sampler.padded == 1
+    x, mask = sampler.sample(400, torch.Generator().manual_seed(0))
+    assert x.shape == (400, 32, 263) and mask.shape == (400, 32) and mask.dtype == torch.bool
+    is_short = x[:, 0, 0] >= 0
+    assert torch.all(mask[is_short].sum(1) == 10) and torch.all(mask[~is_short])
+    assert torch.equal(x[is_short][:, 10:], x[is_short][:, 9:10].expand(-1, 22, -1))  # last frame repeated
+    # drawn in proportion to max(frames, window): 32 : 100
+    assert abs(float(is_short.float().mean()) - 32 / 132) < 0.06

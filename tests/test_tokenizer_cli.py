@@ -52,7 +52,7 @@ def test_train_resume_and_reconstruct(tmp_path, capsys):
     torch.set_num_threads(1)
     data = write_prepared(tmp_path / "prepared")
     config = tmp_path / "tiny.json"
-    config.write_text(json.dumps({"tokenizer": TINY, "train": {"window": 16, "batch_size": 2, "warmup_steps": 1,
+    config.write_text(json.dumps({"tokenizer": TINY, "train": {"window": 48, "batch_size": 2, "warmup_steps": 1,
                                                                 "steps_per_epoch": 2, "val_clips": 2, "val_sample_steps": 2}}))
     run = tmp_path / "run"
     assert main(["train", "tokenizer", "--data", str(data), "--out", str(run), "--config", str(config), "--steps", "4"]) == 0
@@ -90,9 +90,9 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "unknown key" in err and "codebook" in err and "Traceback" not in err
     short = tmp_path / "short.json"
-    short.write_text(json.dumps({"train": {"window": 400}}))
+    short.write_text(json.dumps({"tokenizer": {"downsample": 3}}))
     assert main(["train", "tokenizer", "--data", str(data), "--out", str(tmp_path / "r2"), "--config", str(short)]) == 2
-    assert "no clip has >= 400 frames" in capsys.readouterr().err
+    assert "downsample must be 2, 4 or 8" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("split", ["test"])

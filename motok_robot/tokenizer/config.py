@@ -48,7 +48,7 @@ class TokenizerConfig:
     code_dim: int = 256  #: d, size of a codebook entry (latent dimension)
     commitment: float = 0.02  #: weight of the commitment loss ||h - sg(q)||^2
     ema_decay: float = 0.99  #: EMA decay of the codebook updates
-    dead_code_threshold: float = 1.0  #: codes whose EMA count falls below this are restarted
+    dead_code_threshold: float = 0.1  #: restart codes whose EMA count < this x the mean count per code
     decoder: str = "diffusion"  #: "diffusion" (MoTok) or "conv" (plain VQ-VAE regression baseline)
     denoiser_width: int = 256  #: channels of the denoiser
     denoiser_blocks: int = 8  #: residual blocks of the denoiser (dilations 1, 2, 4, 8 repeating)

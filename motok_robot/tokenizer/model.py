@@ -244,8 +244,13 @@ class MoTok(nn.Module):
         return self.decode(self.encode(padded), length=length, steps=steps, seed=seed)
 
     # -- training -------------------------------------------------------------------------
-    def training_losses(self, features: torch.Tensor, generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:
+    def training_losses(
+        self, features: torch.Tensor, generator: torch.Generator | None = None, mask: torch.Tensor | None = None
+    ) -> dict[str, torch.Tensor]:
         """Losses on a batch of raw features ``[B, T, F]`` (T a multiple of frames_per_token).
+
+        ``mask [B, T]`` (bool, optional) marks the real frames of clips padded to T; padded
+        frames are encoded (they repeat the last frame) but excluded from the losses.
 
         Returns a dict of scalars: ``loss`` (total to minimise), ``reconstruction`` (diffusion
         MSE on x0 or eps in model space, or the conv decoder's MSE), ``commitment``, the
@@ -263,7 +268,7 @@ class MoTok(nn.Module):
         out: dict[str, torch.Tensor] = {}
         if self.denoiser is None:
             x0_hat_model = s
-            reconstruction = F.mse_loss(s, x)
+            reconstruction = _masked_mse(s, x, mask)
         else:
             x0 = self.projection.project(x) if self.projection is not None else x
             batch = x0.shape[0]
@@ -273,16 +278,17 @@ class MoTok(nn.Module):
             x_t = ab.sqrt() * x0 + (1 - ab).sqrt() * noise
             pred = self.denoiser(x_t, t, s)
             if cfg.parameterisation == "x0":
-                reconstruction = F.mse_loss(pred, x0)
+                reconstruction = _masked_mse(pred, x0, mask)
                 x0_hat_model = pred
             else:
-                reconstruction = F.mse_loss(pred, noise)
+                reconstruction = _masked_mse(pred, noise, mask)
                 x0_hat_model = ((x_t - (1 - ab).sqrt() * pred) / ab.sqrt().clamp_min(1e-6)).clamp(-EPS_X0_CLAMP, EPS_X0_CLAMP)
         out["reconstruction"] = reconstruction
         out["commitment"] = vq.commitment
         loss = reconstruction + cfg.commitment * vq.commitment
         if cfg.joint_weight or cfg.velocity_weight or cfg.foot_weight:
-            geometric = self.geometric_losses(self.from_model_space(x0_hat_model) if self.denoiser is not None else self.denormalise(x0_hat_model), features)
+            predicted = self.from_model_space(x0_hat_model) if self.denoiser is not None else self.denormalise(x0_hat_model)
+            geometric = self.geometric_losses(predicted, features, mask)
             for name, weight in (("joints", cfg.joint_weight), ("velocity", cfg.velocity_weight), ("foot", cfg.foot_weight)):
                 if weight:
                     out[name] = geometric[name]
@@ -292,28 +298,40 @@ class MoTok(nn.Module):
         out["usage"] = vq.usage.detach()
         return out
 
-    def geometric_losses(self, predicted: torch.Tensor, target: torch.Tensor) -> dict[str, torch.Tensor]:
+    def geometric_losses(self, predicted: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
         """MDM's geometric losses between raw feature batches ``[B, T, F]``: joint positions
         (m^2), joint velocities (m^2 / frame^2) and predicted foot velocity where the target's
-        contact bit is set (m^2 / frame^2)."""
+        contact bit is set (m^2 / frame^2); ``mask [B, T]`` excludes padded frames."""
         from motok_robot.motion.features_torch import foot_contact_velocity, joints_from_features
 
+        valid = torch.ones(target.shape[:2], dtype=torch.bool, device=target.device) if mask is None else mask.bool()
+        step_valid = (valid[:, 1:] & valid[:, :-1]).float()  # [B, T-1]
         j_hat = joints_from_features(predicted)
         j = joints_from_features(target)
-        v_hat = j_hat[..., 1:, :, :] - j_hat[..., :-1, :, :]
-        v = j[..., 1:, :, :] - j[..., :-1, :, :]
+        v_hat = j_hat[:, 1:] - j_hat[:, :-1]
+        v = j[:, 1:] - j[:, :-1]
         contacts = target[..., _CONTACT_DIMS]
         foot_velocity = foot_contact_velocity(j_hat, contacts)  # [B, T-1, 4, 3], zero where no contact
-        on = (contacts[..., :-1, :] > 0.5).float()
+        on = (contacts[:, :-1] > 0.5).float() * step_valid[..., None]
+        frame_err = (j_hat - j).pow(2).sum(-1).mean(-1)  # [B, T]
+        step_err = (v_hat - v).pow(2).sum(-1).mean(-1)  # [B, T-1]
         return {
-            "joints": (j_hat - j).pow(2).sum(-1).mean(),
-            "velocity": (v_hat - v).pow(2).sum(-1).mean(),
-            "foot": foot_velocity.pow(2).sum(-1).sum() / on.sum().clamp_min(1.0),
+            "joints": (frame_err * valid.float()).sum() / valid.float().sum().clamp_min(1.0),
+            "velocity": (step_err * step_valid).sum() / step_valid.sum().clamp_min(1.0),
+            "foot": (foot_velocity.pow(2).sum(-1) * on).sum() / on.sum().clamp_min(1.0),
         }
 
     def extra_repr(self) -> str:
         n = sum(p.numel() for p in self.parameters())
         return f"decoder={self.config.decoder}, downsample={self.config.downsample}, K={self.config.codebook_size}, params={n / 1e6:.2f}M"
+
+
+def _masked_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
+    """Mean squared error over ``[B, T, F]``, counting only frames where ``mask [B, T]`` is set."""
+    if mask is None:
+        return F.mse_loss(pred, target)
+    weight = mask.to(pred.dtype)[..., None]
+    return ((pred - target).pow(2) * weight).sum() / (weight.sum() * pred.shape[-1]).clamp_min(1.0)
 
 
 def parameter_count(model: nn.Module) -> int:

@@ -4,9 +4,10 @@
 (``q = h + sg(q - h)``); the encoder is pulled to its code by the commitment loss
 ``||h - sg(q)||^2``; the codebook itself is not trained by gradients but follows an
 exponential moving average of the encoder outputs assigned to each code.  A code whose EMA
-assignment count drops below ``dead_code_threshold`` is restarted at a random encoder
-output of the current batch (drawn with the caller's generator, so training stays
-deterministic).  The codebook is initialised from the first training batch.
+assignment count drops below ``dead_code_threshold`` times the average count per code
+(``M / K`` for ``M`` latents per batch, so the rule does not depend on the batch size) is
+restarted at a random encoder output of the current batch (drawn with the caller's
+generator, so training stays deterministic).  The codebook is initialised from the first training batch.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ class VectorQuantizer(nn.Module):
     """Buffers: ``codebook [K, d]``, ``ema_count [K]``, ``ema_sum [K, d]``, ``initialised`` (0/1),
     ``restarts`` (total restarted codes, for logging)."""
 
-    def __init__(self, codebook_size: int, code_dim: int, decay: float = 0.99, dead_code_threshold: float = 1.0, eps: float = 1e-5):
+    def __init__(self, codebook_size: int, code_dim: int, decay: float = 0.99, dead_code_threshold: float = 0.1, eps: float = 1e-5):
         super().__init__()
         self.codebook_size = int(codebook_size)
         self.code_dim = int(code_dim)
@@ -66,9 +67,10 @@ class VectorQuantizer(nn.Module):
     @torch.no_grad()
     def _init_from(self, flat: torch.Tensor, generator: torch.Generator | None) -> None:
         picks = _random_rows(flat, self.codebook_size, generator)
+        mean_count = flat.shape[0] / self.codebook_size
         self.codebook.copy_(picks)
-        self.ema_sum.copy_(picks)
-        self.ema_count.fill_(1.0)
+        self.ema_sum.copy_(picks * mean_count)
+        self.ema_count.fill_(mean_count)
         self.initialised.fill_(1)
 
     @torch.no_grad()
@@ -85,16 +87,18 @@ class VectorQuantizer(nn.Module):
 
     @torch.no_grad()
     def restart_dead_codes(self, flat: torch.Tensor, generator: torch.Generator | None = None) -> int:
-        """Move every code with ``ema_count < dead_code_threshold`` onto a random row of
-        ``flat [M, d]`` (current encoder outputs); return how many were restarted."""
-        dead = self.ema_count < self.dead_code_threshold
+        """Move every code with ``ema_count < dead_code_threshold * M / K`` onto a random row of
+        ``flat [M, d]`` (current encoder outputs), with the average count ``M / K``; return how
+        many were restarted."""
+        mean_count = flat.shape[0] / self.codebook_size
+        dead = self.ema_count < self.dead_code_threshold * mean_count
         n_dead = int(dead.sum())
         if n_dead == 0:
             return 0
         picks = _random_rows(flat, n_dead, generator)
         self.codebook[dead] = picks
-        self.ema_sum[dead] = picks
-        self.ema_count[dead] = 1.0
+        self.ema_sum[dead] = picks * mean_count
+        self.ema_count[dead] = mean_count
         self.restarts.add_(n_dead)
         return n_dead
 

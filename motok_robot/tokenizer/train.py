@@ -64,26 +64,40 @@ class Clips:
 
 
 class WindowSampler:
-    """Random fixed-length windows from clips at least ``window`` frames long."""
+    """Random fixed-length windows ``[B, window, F]`` with a mask of real frames ``[B, window]``.
 
-    def __init__(self, clips: Clips, window: int, what: str = "train"):
-        keep = [i for i, f in enumerate(clips.features) if f.shape[0] >= window]
+    A clip is drawn with probability proportional to ``max(frames, window)``, so every frame
+    of the data is (in expectation) seen equally often; a window starts uniformly inside it.
+    Clips shorter than the window are used whole, padded by repeating their last frame (the
+    mask excludes the padding from the losses).  Clips shorter than ``min_frames`` are skipped.
+    """
+
+    def __init__(self, clips: Clips, window: int, min_frames: int = 1, what: str = "train"):
+        keep = [i for i, f in enumerate(clips.features) if f.shape[0] >= min_frames]
         if not keep:
             longest = max((f.shape[0] for f in clips.features), default=0)
-            raise InputError(f"{what} split: no clip has >= {window} frames (longest {longest}); lower the train window")
+            raise InputError(f"{what} split: no clip has >= {min_frames} frames (longest {longest})")
         self.window = window
         self.features = [clips.features[i] for i in keep]
         self.skipped = len(clips.features) - len(keep)
+        self.padded = sum(f.shape[0] < window for f in self.features)
+        self.weights = torch.tensor([float(max(f.shape[0], window)) for f in self.features], dtype=torch.float64)
 
-    def sample(self, batch: int, generator: torch.Generator) -> torch.Tensor:
-        """``[batch, window, F]`` float32: a clip uniformly, then a start frame uniformly."""
-        which = torch.randint(0, len(self.features), (batch,), generator=generator).tolist()
-        out = []
-        for i in which:
+    def sample(self, batch: int, generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+        which = torch.multinomial(self.weights, batch, replacement=True, generator=generator).tolist()
+        out = np.empty((batch, self.window, self.features[0].shape[1]), dtype=np.float32)
+        mask = np.zeros((batch, self.window), dtype=bool)
+        for b, i in enumerate(which):
             clip = self.features[i]
-            start = int(torch.randint(0, clip.shape[0] - self.window + 1, (1,), generator=generator))
-            out.append(clip[start : start + self.window])
-        return torch.from_numpy(np.stack(out)).float()
+            if clip.shape[0] >= self.window:
+                start = int(torch.randint(0, clip.shape[0] - self.window + 1, (1,), generator=generator))
+                out[b] = clip[start : start + self.window]
+                mask[b] = True
+            else:
+                out[b, : clip.shape[0]] = clip
+                out[b, clip.shape[0] :] = clip[-1]
+                mask[b, : clip.shape[0]] = True
+        return torch.from_numpy(out), torch.from_numpy(mask)
 
 
 def learning_rate(step: int, total: int, cfg: TrainConfig) -> float:
@@ -93,15 +107,6 @@ def learning_rate(step: int, total: int, cfg: TrainConfig) -> float:
     span = max(total - cfg.warmup_steps, 1)
     progress = min(max(step - cfg.warmup_steps, 0) / span, 1.0)
     return cfg.lr * (cfg.lr_min_ratio + (1 - cfg.lr_min_ratio) * 0.5 * (1 + math.cos(math.pi * progress)))
-
-
-def joints_fn():
-    """Differentiable ``joints_from_features`` (torch) of the motion stage, or None if absent."""
-    try:
-        from motok_robot.motion.features_torch import joints_from_features
-    except ImportError:
-        return None
-    return joints_from_features
 
 
 # -- optimiser state <-> safetensors --------------------------------------------------------
@@ -142,39 +147,39 @@ def _read_metrics(path: Path) -> list[dict[str, Any]]:
 
 
 # -- validation ----------------------------------------------------------------------------
-def validation_windows(clips: Clips, window: int, count: int, seed: int) -> torch.Tensor | None:
-    """A fixed set of up to ``count`` windows ``[n, window, F]`` from the val clips (or None)."""
-    usable = [f for f in clips.features if f.shape[0] >= window]
-    if not usable or count < 1:
+def validation_windows(clips: Clips, window: int, count: int, seed: int, min_frames: int = 1) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """A fixed set of ``count`` windows (and masks) from the val clips, or None."""
+    if count < 1 or not any(f.shape[0] >= min_frames for f in clips.features):
         return None
     generator = torch.Generator().manual_seed(seed + 7919)
-    sampler = WindowSampler(Clips([str(i) for i in range(len(usable))], usable), window, "val")
-    return sampler.sample(count, generator)
+    return WindowSampler(clips, window, min_frames, "val").sample(count, generator)
 
 
 @torch.no_grad()
-def evaluate_windows(model: MoTok, windows: torch.Tensor, steps: int, batch: int = 32) -> dict[str, float]:
-    """Reconstruct ``windows [n, T, F]``: feature MSE (normalised units), MPJPE (cm, no
-    alignment; NaN when the motion stage's ``features_torch`` is not available), codebook usage
-    and perplexity of their tokens."""
+def evaluate_windows(model: MoTok, windows: torch.Tensor, mask: torch.Tensor, steps: int, batch: int = 32) -> dict[str, float]:
+    """Reconstruct ``windows [n, T, F]`` (real frames where ``mask [n, T]``): feature MSE
+    (normalised units), MPJPE (cm, no alignment), codebook usage and perplexity of their tokens."""
     was_training = model.training
     model.eval()
-    fk = joints_fn()
-    sq, count, mpjpe_sum, tokens = 0.0, 0, 0.0, []
+    from motok_robot.motion.features_torch import joints_from_features
+
+    sq, frames, mpjpe_sum, tokens = 0.0, 0.0, 0.0, []
     for start in range(0, windows.shape[0], batch):
         x = windows[start : start + batch].to(model.device)
+        m = mask[start : start + batch].to(model.device).float()
         z = model.encode(x)
         y = model.decode(z, length=x.shape[1], steps=steps, seed=start)
         tokens.append(z.reshape(-1).cpu())
-        sq += float((model.normalise(y) - model.normalise(x)).pow(2).mean()) * x.shape[0]
-        if fk is not None:
-            mpjpe_sum += float((fk(y) - fk(x)).norm(dim=-1).mean()) * x.shape[0]
-        count += x.shape[0]
+        sq += float(((model.normalise(y) - model.normalise(x)).pow(2).mean(-1) * m).sum())
+        # joints of the real frames only: the padding would integrate the root further
+        err = (joints_from_features(y) - joints_from_features(x)).norm(dim=-1).mean(-1)  # [b, T]
+        mpjpe_sum += float((err * m).sum())
+        frames += float(m.sum())
     model.train(was_training)
     stats = code_statistics(torch.cat(tokens), model.config.codebook_size)
     return {
-        "val_feature_mse": sq / count,
-        "val_mpjpe_cm": 100.0 * mpjpe_sum / count if fk is not None else float("nan"),
+        "val_feature_mse": sq / max(frames, 1.0),
+        "val_mpjpe_cm": 100.0 * mpjpe_sum / max(frames, 1.0),
         "val_usage": float(stats["usage"]),
         "val_perplexity": float(stats["perplexity"]),
     }
@@ -229,8 +234,9 @@ def train_tokenizer(
     device = torch.device(cfg.device)
 
     window = max(cfg.window - cfg.window % tok_cfg.downsample, tok_cfg.downsample)
-    sampler = WindowSampler(train, window, "train")
-    val_windows = validation_windows(val, window, cfg.val_clips, cfg.seed) if val is not None else None
+    min_frames = 2 * tok_cfg.downsample
+    sampler = WindowSampler(train, window, min_frames, "train")
+    val_windows = validation_windows(val, window, cfg.val_clips, cfg.seed, min_frames) if val is not None else None
     steps_per_epoch = cfg.steps_per_epoch or max(1, math.ceil(len(sampler.features) / cfg.batch_size))
     total = cfg.steps if cfg.steps > 0 else cfg.epochs * steps_per_epoch
 
@@ -273,8 +279,8 @@ def train_tokenizer(
         lr = learning_rate(step, total, cfg)
         for group in optimizer.param_groups:
             group["lr"] = lr
-        batch = sampler.sample(cfg.batch_size, generator).to(device)
-        losses = model.training_losses(batch, generator)
+        batch, mask = sampler.sample(cfg.batch_size, generator)
+        losses = model.training_losses(batch.to(device), generator, mask.to(device))
         optimizer.zero_grad(set_to_none=True)
         losses["loss"].backward()
         if cfg.grad_clip > 0:
@@ -292,7 +298,7 @@ def train_tokenizer(
             for key in _RUNNING:
                 row[f"train_{key}"] = running[key] / max(running_n, 1)
             if val_windows is not None:
-                row.update(evaluate_windows(model, val_windows, cfg.val_sample_steps))
+                row.update(evaluate_windows(model, *val_windows, steps=cfg.val_sample_steps))
             row["restarts"] = int(model.quantizer.restarts)
             row["seconds"] = round(time.perf_counter() - started, 2)
             rows.append(row)
@@ -308,8 +314,9 @@ def train_tokenizer(
         "total_steps": total,
         "steps_per_epoch": steps_per_epoch,
         "window": window,
-        "train_windows_from": len(sampler.features),
-        "train_clips_too_short": sampler.skipped,
+        "train_clips": len(sampler.features),
+        "train_clips_padded": sampler.padded,
+        "train_clips_skipped": sampler.skipped,
         "last": rows[-1] if rows else None,
     }
 
