@@ -165,6 +165,7 @@ def test_generate_errors_are_one_line(runs, tmp_path, capsys, monkeypatch):
         (["generate", "walk", "--seconds", "60"] + common, "at most"),
         (["generate", "--action", "fly"] + common, "unknown action"),
         (["generate"] + common, "TEXT"),
+        (["generate", "walk", "--out", str(runs / "tiny.json" / "m.npz")] + common[:4], "in the way"),
     ]
     for argv, message in cases:
         assert main(argv) == 2, argv

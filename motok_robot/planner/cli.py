@@ -136,21 +136,26 @@ def _generate(args: argparse.Namespace) -> int:
         raise InputError(f"--seconds must be positive (got {args.seconds:g})")
     if args.text is not None:
         check_text(args.text)
+    prompts = read_prompts(args.prompts) if args.prompts is not None else None
+    if prompts is not None:
+        if args.out.suffix == ".npz" or (args.out.exists() and not args.out.is_dir()):
+            raise InputError(f"--out {args.out}: with --prompts, --out must be a directory")
+        out = None
+    else:
+        out = args.out if args.out.suffix == ".npz" else args.out / "motion.npz"
+        if out.is_dir() or (out.parent.exists() and not out.parent.is_dir()):
+            raise InputError(f"--out {args.out}: cannot write {out} (a directory or a file is in the way)")
     trajectory = _read_trajectory(args.trajectory) if args.trajectory is not None else None
     gen = load_generator(args.planner, args.tokenizer, args.planner_run, args.device)
     options = dict(seconds=args.seconds, seed=args.seed, cfg_scale=args.cfg, steps=args.steps,
                    decoder_steps=args.decoder_steps, temperature=args.temperature, top_k=args.top_k,
                    top_p=args.top_p, trajectory=trajectory)
-    if args.prompts is not None:
-        prompts = read_prompts(args.prompts)
-        if args.out.suffix == ".npz":
-            raise InputError(f"--out {args.out}: with --prompts, --out must be a directory")
+    if prompts is not None:
         for i, prompt in enumerate(tqdm(prompts, desc="generating", unit="prompt", disable=None)):
             motion = gen.generate(text=prompt, **options)
             motion.save(args.out / f"{i:03d}_{_slug(prompt)}.npz")
         print(f"{len(prompts)} motions written to {args.out}")
         return 0
-    out = args.out if args.out.suffix == ".npz" else args.out / "motion.npz"
     motion = gen.generate(text=args.text, action=args.action, unconditional=args.unconditional, **options)
     motion.save(out)
     t = motion.timings
