@@ -3,8 +3,8 @@
 Cache files (in ``RUN/cache/``; plain numpy / safetensors, no pickle):
 
 * ``tokens_<split>.npz``: ``ids`` (str ``[C]``), ``offsets`` (int64 ``[C + 1]``), ``tokens`` (int64,
-  all clips concatenated), ``key`` (str: tokenizer weights hash + data directory); rebuilt when the
-  key differs.
+  all clips concatenated), ``key`` (str: tokenizer weights hash, data directory, split, size and
+  modification time of ``index.jsonl``); rebuilt when the key differs.
 * ``text_<encoder>.safetensors`` + ``text_<encoder>.json``: embeddings ``[U, D]`` of every unique
   sentence and the sentences in row order.
 
@@ -226,7 +226,9 @@ def load_planner_data(
 ) -> PlannerData:
     """Tokenise (cached), embed texts (cached) and assemble :class:`PlannerData` for ``split``."""
     dataset = open_dataset(data_dir, split)
-    key = f"{tokenizer_key}|{Path(data_dir).resolve()}|{split}"
+    index = Path(data_dir) / "index.jsonl"
+    stat = index.stat()
+    key = f"{tokenizer_key}|{Path(data_dir).resolve()}|{split}|{stat.st_size}|{stat.st_mtime_ns}"
     token_map = tokenise_split(dataset, tokenizer, cache_dir / f"tokens_{split}.npz", key)
     ds = tokenizer.frames_per_token
     texts_per_clip: dict[str, list[str]] = {}
