@@ -227,3 +227,25 @@ def test_generator_hooks_for_the_control_stage(runs):
     ar = load_generator("ar", runs / "tok", runs / "ar")
     with pytest.raises(InputError, match="masked planner"):
         ar.generate("a person walks forward", seconds=1.2, keep_tokens=keep)
+
+
+def test_token_cache_is_reused_and_keyed(runs):
+    from motok_robot.planner.data import open_dataset, tokenise_split
+
+    class NoEncode:
+        frames_per_token = 4
+
+        def parameters(self):
+            yield torch.zeros(1)
+
+        def encode(self, _):
+            raise AssertionError("re-tokenised although the cache matches")
+
+    cache = runs / "masked" / "cache" / "tokens_train.npz"
+    with np.load(cache) as z:
+        key = str(z["key"])
+    dataset = open_dataset(runs / "data", "train")
+    tokens = tokenise_split(dataset, NoEncode(), cache, key)
+    assert set(tokens) == set(dataset.clip_ids) and all(t.dtype == np.int64 for t in tokens.values())
+    with pytest.raises(AssertionError, match="re-tokenised"):
+        tokenise_split(dataset, NoEncode(), cache, key + "|other tokenizer")
