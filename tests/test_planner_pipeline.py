@@ -164,6 +164,9 @@ def test_generate_errors_are_one_line(runs, tmp_path, capsys, monkeypatch):
         (["generate", "walk", "--seconds", "-1"] + common, "positive"),
         (["generate", "walk", "--seconds", "60"] + common, "at most"),
         (["generate", "--action", "fly"] + common, "unknown action"),
+        (["generate", "walk", "--decoder-steps", "0"] + common, "decoder_steps"),
+        (["generate", "walk", "--top-p", "1.5"] + common, "top_p"),
+        (["generate", "walk", "--temperature", "-1"] + common, "temperature"),
         (["generate"] + common, "TEXT"),
         (["generate", "walk", "--out", str(runs / "tiny.json" / "m.npz")] + common[:4], "in the way"),
     ]

@@ -201,6 +201,15 @@ class MotionGenerator:
         cfg = self.planner.config
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise InputError(f"seed must be a non-negative integer, got {seed!r}")
+        for name, value, low in (("steps", steps, 1), ("decoder_steps", decoder_steps, 1), ("top_k", top_k, 1)):
+            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low):
+                raise InputError(f"{name} must be an integer >= {low}, got {value!r}")
+        if temperature is not None and not (math.isfinite(temperature) and temperature >= 0):
+            raise InputError(f"temperature must be >= 0 (0 = greedy), got {temperature!r}")
+        if top_p is not None and not 0.0 < top_p <= 1.0:
+            raise InputError(f"top_p must be in (0, 1], got {top_p!r}")
+        if cfg_scale is not None and not math.isfinite(cfg_scale):
+            raise InputError(f"cfg_scale must be a finite number, got {cfg_scale!r}")
         given = sum(x for x in (text is not None, action is not None, bool(unconditional)))
         if given != 1:
             raise InputError("give exactly one of: a text prompt, an action label (--action), or --unconditional")
@@ -250,13 +259,13 @@ class MotionGenerator:
             temperature=defaults.temperature if temperature is None else float(temperature),
             top_k=top_k if top_k is not None else defaults.top_k,
             top_p=top_p if top_p is not None else defaults.top_p,
-            steps=steps or defaults.steps,
+            steps=defaults.steps if steps is None else steps,
             keep_tokens=None if keep_tokens is None else torch.as_tensor(keep_tokens)[None],
             remask_noise=defaults.remask_noise,
         )
         timings["plan"] = time.perf_counter() - t1
         t2 = time.perf_counter()
-        steps_dec = decoder_steps or defaults.decoder_steps
+        steps_dec = defaults.decoder_steps if decoder_steps is None else decoder_steps
         if decode is None:
             features = self.tokenizer.decode(tokens, length=frames, steps=steps_dec, seed=int(seed))
         else:
