@@ -144,8 +144,9 @@ def train_planner(
     try:
         val_data = load_planner_data(data_dir, "val", tokenizer, tokenizer_key, encoder, cache,
                                      config.action_labels, config.max_tokens)
-    except InputError:
-        val_data = train_data  # tiny datasets without a val split
+    except InputError as exc:  # tiny datasets without a usable val split
+        print(f"warning: no usable val split ({exc}); validation metrics are computed on the train split")
+        val_data = train_data
     del tokenizer
 
     model = build_planner(config).to(dev)
