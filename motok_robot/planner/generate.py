@@ -253,9 +253,12 @@ class MotionGenerator:
             cond.local = local.to(self.device)
 
         t1 = time.perf_counter()
+        scale = defaults.cfg_scale if cfg_scale is None else float(cfg_scale)
+        if unconditional:
+            scale = 1.0  # both guidance branches would be the null condition
         tokens = self.planner.plan(
             cond, n_tokens, seed=int(seed),
-            cfg_scale=defaults.cfg_scale if cfg_scale is None else float(cfg_scale),
+            cfg_scale=scale,
             temperature=defaults.temperature if temperature is None else float(temperature),
             top_k=top_k if top_k is not None else defaults.top_k,
             top_p=top_p if top_p is not None else defaults.top_p,
