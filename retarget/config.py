@@ -61,7 +61,9 @@ class SolverConfig:
     linear_solver: str = "mumps"
     mu_strategy: str = "adaptive"
     mu_init: float = 1e-2  # the primal start is close (previous window / previous frame)
-    max_pitch: float = 1.3  # rad; Euler base parametrisation is singular at pi/2 (see problem.py)
+    max_tilt: float = 1.0  # rad; bound on base pitch and roll (Euler singular at pi/2, see problem.py)
+    max_yaw_offset: float = 1.2  # rad; bound on |base yaw - human heading| (no turning the wrong way round)
+    base_height_range: tuple = (0.3, 1.6)  # base z bounds as fractions of the nominal base height
     extra: tuple = ()  # further (name, value) IPOPT options, e.g. (("print_level", 5),)
 
 

@@ -6,10 +6,12 @@ Decision variables, for each of the ``W`` frames of a window (``nx = 6 + nj`` pe
 
 **Base orientation.** ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)`` (intrinsic z-y-x Euler angles).
 Yaw is an unbounded, *unwrapped* angle warm-started from the unwrapped human heading, so
-turning through +-pi never flips; pitch is bounded to ``+-SolverConfig.max_pitch`` (< pi/2),
-away from the only singularity of this parametrisation. A pelvis never pitches 75 degrees
-in walking mocap; if it must, the bound is reported as the active constraint. No unit-norm
-constraint is needed (unlike a quaternion) and the variables stay well scaled.
+turning through +-pi never flips; it is also bounded to the human heading +-
+``SolverConfig.max_yaw_offset``. Pitch and roll are bounded to ``+-SolverConfig.max_tilt``
+(1 rad < pi/2, away from the only singularity of this parametrisation) and the base height
+to ``SolverConfig.base_height_range`` x its nominal height: these box bounds keep the
+optimiser out of flipped or lying-down local minima. No unit-norm constraint is needed
+(unlike a quaternion) and the variables stay well scaled.
 
 **Parameters** (a numeric vector ``p``, so one compiled solver serves every window):
 scaled human keypoint targets ``[W, K, 3]``, human heading ``[W]``, human foot directions
@@ -306,8 +308,10 @@ class WindowProblem:
         self.solver = ca.nlpsol("retarget_window", "ipopt", nlp, opts)
         self.ng = int(nlp["g"].shape[0])
 
-        lo = np.concatenate([np.full(3, -np.inf), [-np.inf, -solver.max_pitch, -np.inf], robot.joint_range[:, 0]])
-        hi = np.concatenate([np.full(3, np.inf), [np.inf, solver.max_pitch, np.inf], robot.joint_range[:, 1]])
+        zn = float(kin.nominal_x[2])
+        zlo, zhi = (solver.base_height_range[0] * zn, solver.base_height_range[1] * zn) if zn > 0 else (-np.inf, np.inf)
+        lo = np.concatenate([[-np.inf, -np.inf, zlo], [-np.inf, -solver.max_tilt, -solver.max_tilt], robot.joint_range[:, 0]])
+        hi = np.concatenate([[np.inf, np.inf, zhi], [np.inf, solver.max_tilt, solver.max_tilt], robot.joint_range[:, 1]])
         self.lbx = np.tile(lo, W)
         self.ubx = np.tile(hi, W)
 
@@ -365,15 +369,19 @@ class WindowProblem:
             ]
         )
         lbg, ubg = self.constraint_bounds(contacts, None if history is None else prev_contact, vel_step, ground)
-        x0v = np.clip(np.asarray(x0, dtype=np.float64).reshape(W, nx).ravel(), self.lbx, self.ubx)
+        lbx, ubx = self.lbx.copy(), self.ubx.copy()
+        yaw_ref = np.asarray(heading, dtype=np.float64).ravel() + self.kin.nominal_x[3]
+        lbx[3::nx] = yaw_ref - self.solver_config.max_yaw_offset
+        ubx[3::nx] = yaw_ref + self.solver_config.max_yaw_offset
+        x0v = np.clip(np.asarray(x0, dtype=np.float64).reshape(W, nx).ravel(), lbx, ubx)
         start = time.perf_counter()
-        res = self.solver(x0=x0v, p=p, lbx=self.lbx, ubx=self.ubx, lbg=lbg, ubg=ubg)
+        res = self.solver(x0=x0v, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         seconds = time.perf_counter() - start
         stats = self.solver.stats()
         x = np.array(res["x"]).reshape(W, nx)
         gval = np.array(res["g"]).ravel()
         viol_g = np.maximum(lbg - gval, gval - ubg)
-        viol_x = np.maximum(self.lbx - x.ravel(), x.ravel() - self.ubx)
+        viol_x = np.maximum(lbx - x.ravel(), x.ravel() - ubx)
         worst_g = int(np.argmax(viol_g)) if len(viol_g) else 0
         worst_x = int(np.argmax(viol_x))
         tol = 10 * self.solver_config.constr_viol_tol

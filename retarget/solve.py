@@ -200,14 +200,28 @@ class Retargeter:
         )
 
     def _warm_start(self, x, known, s, e, targets: HumanTargets, kp_targets) -> np.ndarray:
-        """Initial guess for frames ``[s, e)``: earlier solutions where they exist, otherwise the
-        last solved frame moved with the human root and heading (or the nominal pose placed on
-        the human root for the first window)."""
+        """Initial guess for frames ``[s, e)``: earlier solutions where they exist; otherwise the
+        solved frame whose human pose (keypoint targets relative to the root, in the heading
+        frame) is nearest, moved to this frame's root and heading (walking repeats itself, so
+        this is usually a close guess); the nominal pose on the human root for the first window."""
         x0 = np.zeros((e - s, self.kin.nx))
         root = self._root_track(kp_targets)
+        solved = np.flatnonzero(known[:s]) if s > 0 else np.zeros(0, dtype=int)
+        if len(solved):
+            local = _heading_local(kp_targets - root[:, None, :], targets.heading)
+            lib = local[solved].reshape(len(solved), -1)
         for i, t in enumerate(range(s, e)):
             if known[t]:
                 x0[i] = x[t]
+                continue
+            if len(solved):
+                u = int(solved[np.argmin(((lib - local[t].reshape(1, -1)) ** 2).sum(axis=1))])
+                d = targets.heading[t] - targets.heading[u]
+                c, si = np.cos(d), np.sin(d)
+                rot = np.array([[c, -si, 0], [si, c, 0], [0, 0, 1]])
+                x0[i] = x[u]
+                x0[i, :3] = root[t] + rot @ (x[u, :3] - root[u])
+                x0[i, 3] = x[u, 3] + d
                 continue
             ref = t - 1 if t >= 1 and (known[t - 1] or i > 0) else None
             if ref is not None:
@@ -241,6 +255,15 @@ class Retargeter:
         idx = self._root_index()
         pts = [self.kin.nominal_sites[self.robot.keypoints[i].human_joint] for i in idx]
         return np.mean(pts, axis=0) if pts else self.kin.nominal_x[:3]
+
+
+def _heading_local(v: np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """Rotate vectors ``v[T, K, 3]`` by ``-heading[T]`` about z."""
+    c, s = np.cos(-heading)[:, None], np.sin(-heading)[:, None]
+    out = v.copy()
+    out[..., 0] = c * v[..., 0] - s * v[..., 1]
+    out[..., 1] = s * v[..., 0] + c * v[..., 1]
+    return out
 
 
 def retarget(joints: np.ndarray, fps: float, robot: RetargetRobot, config: RetargetConfig = RetargetConfig(), progress: bool | None = None) -> RetargetResult:

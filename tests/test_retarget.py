@@ -430,3 +430,22 @@ def test_cli_retarget_op3_like(tmp_path):
     back = read_robot_npz(out)
     assert back.robot == "op3_like" and back.qpos.shape[0] == 30
     assert main(["retarget", str(motion), "--robot", "no_such_robot", "--out", str(tmp_path / "x.npz")]) == 2
+
+
+def test_soft_com_term_pulls_com_over_support(robot, small):
+    human = synthetic_walk(T=40)
+    with_com = Retargeter(robot, replace(SMALL, weights=replace(SMALL.weights, com=1000.0)))
+
+    def com_offset(rt, res):
+        out = rt.kin.frame.map(len(res.x))(res.x.T)
+        com = np.array(out[4]).T[:, :2]
+        soles = np.array(out[1]).reshape(3, 2, -1, order="F").transpose(2, 1, 0)[..., :2]
+        m = res.contacts.astype(float)
+        keep = m.sum(1) > 0
+        centre = (m[:, :, None] * soles).sum(1)[keep] / m.sum(1)[keep, None]
+        return np.linalg.norm(com[keep] - centre, axis=1).mean()
+
+    a = small.run(human, 20.0, progress=False)
+    b = with_com.run(human, 20.0, progress=False)
+    assert b.success
+    assert com_offset(with_com, b) < 0.8 * com_offset(small, a)
