@@ -31,6 +31,7 @@ import cProfile
 import io
 import os
 import pstats
+import statistics
 import sys
 import tempfile
 import time
@@ -127,11 +128,18 @@ def main() -> int:
         results["load"] = {"median_s": time.perf_counter() - t, "repeat": 1, "note": "once"}
         seeds = iter(range(10_000))
 
+        parts: dict[str, list[float]] = {}
+
         def generate():
             gen.text_encoder.clear_cache()
-            return gen.generate(PROMPT, seconds=args.seconds, seed=next(seeds))
+            motion = gen.generate(PROMPT, seconds=args.seconds, seed=next(seeds))
+            for key, value in motion.timings.items():
+                parts.setdefault(key, []).append(value)
+            return motion
 
         results["generate"] = time_median(generate, repeat=args.repeat, warmup=1)
+        results["generate"]["parts_median_s"] = {k: round(statistics.median(v[1:] or v), 4) for k, v in parts.items()}
+        results["generate"]["decoder_steps"] = gen.tokenizer.config.sample_steps
         if "generate" in args.profile:
             profiles["generate"] = _profile(generate)
         if args.random_init:
@@ -225,6 +233,9 @@ def main() -> int:
                    ("yes" if all(r["meets"]) else "cpu only" if r["meets"][0] else "NO")} for r in rows]
     print(markdown_table(table_rows, ["stage", "median_s", "cpu_median_s", "min_s", "max_s", "runs", "target_s", "meets"],
                          headers={"median_s": "wall median s", "cpu_median_s": "CPU median s"}))
+    if "generate" in results:
+        print(f"generate parts (median s): {results['generate']['parts_median_s']}; "
+              f"decoder steps {results['generate']['decoder_steps']}")
     rtr = results["retarget"]
     print(f"retarget: {rtr['windows']} IPOPT windows, iterations {rtr['ipopt_iterations']}, "
           f"converged {rtr['converged']}")

@@ -17,7 +17,7 @@ retarget       ``robot.npz`` (qpos [T, nq] in MuJoCo order, contacts, keypoint e
 validate       ``report.json`` (pass/fail checks), ``plots``: ``balance_topview.png``,
                ``feet.png``, ``joints.png``, ``torques.png``; ``render``: ``video.mp4``
 playback       ``playback.csv`` (one row per control tick) and ``playback.stats.json``;
-               with ``playback="sim"`` and ``render``: ``playback_sim.mp4``
+               with ``playback="sim"`` and ``config.sim_video``: ``playback_sim.mp4``
 (always)       ``summary.md`` linking every file with the verdict and per-stage times,
                ``pipeline.json`` (the same, machine-readable)
 =============  ===============================================================================
@@ -88,6 +88,8 @@ class PipelineConfig:
         plots: write the validation PNG plots.
         realtime: play dry-run and sim playback at the wall-clock rate (default: simulated time,
             which takes a fraction of a second; hardware always runs in real time).
+        sim_video: with ``playback="sim"`` and ``render``, also record ``playback_sim.mp4`` (the
+            simulated servo playback, ramp included; slow: about 10x the clip with software EGL).
     """
 
     planner: str = "masked"
@@ -100,6 +102,7 @@ class PipelineConfig:
     playback: object | None = None
     plots: bool = True
     realtime: bool = False
+    sim_video: bool = False
 
 
 @dataclass
@@ -467,7 +470,8 @@ class Pipeline:
             playback: ``"dry-run"`` (emulated servo chain), ``"sim"`` (MuJoCo) or ``"port"``.
             port: serial device for ``playback="port"``.
             force: play on hardware even when validation failed.
-            render: write ``video.mp4`` (and ``playback_sim.mp4`` with ``playback="sim"``).
+            render: write ``video.mp4`` (and ``playback_sim.mp4`` with ``playback="sim"`` and
+                ``config.sim_video``).
             control: :class:`motok_robot.control.config.ControlConfig` for constrained generation.
             control_path: ``"both"``, ``"planner"`` or ``"decoder"`` (constrained generation).
             overwrite: replace a non-empty ``out_dir`` (only once the new run has finished).
@@ -673,7 +677,7 @@ class Pipeline:
             elif mode == "sim":
                 from motok_robot.servo.sim_rig import SimRig
 
-                video = tmp / "playback_sim.mp4" if render else None
+                video = tmp / "playback_sim.mp4" if render and self.config.sim_video else None
                 bus = rig = SimRig(robot, clock=clock, render_path=video)
             else:
                 bus = DynamixelBus(port, baud)
@@ -703,7 +707,7 @@ class Pipeline:
             summary.fell = bool(rig.fell)
             summary.line += (f"; simulated robot {'FELL' if rig.fell else 'stayed upright'} "
                              f"(lowest base height {rig.min_base_height:.3f} m)")
-            if render and (tmp / "playback_sim.mp4").is_file():
+            if (tmp / "playback_sim.mp4").is_file():
                 files["playback_video"] = tmp / "playback_sim.mp4"
         if simulated:
             summary.line += " [simulated time]"

@@ -40,6 +40,8 @@ def register(commands, groups) -> None:
     parser.add_argument("--force", action="store_true", help="with --port: play even when validation failed")
     parser.add_argument("--no-render", action="store_true", help="skip the videos (faster)")
     parser.add_argument("--no-plots", action="store_true", help="skip the validation plots (faster)")
+    parser.add_argument("--sim-video", action="store_true",
+                        help="with --sim: also record the simulated playback to playback_sim.mp4 (slow)")
     parser.add_argument("--realtime", action="store_true",
                         help="run the dry-run / --sim playback at the wall-clock rate (default: simulated time)")
     parser.add_argument("--prompts", type=Path, default=None, metavar="FILE",
@@ -74,6 +76,8 @@ def run_command(args: argparse.Namespace) -> int:
 
     robot = args.robot or DEFAULT_ROBOT
     playback = "sim" if args.sim else "port" if args.port else "dry-run"
+    if args.sim_video and not args.sim:
+        raise InputError("--sim-video needs --sim")
     if args.force and not args.port:
         raise InputError("--force only applies to hardware playback (--port DEV)")
     control = _has_control(args)
@@ -101,7 +105,7 @@ def run_command(args: argparse.Namespace) -> int:
     generation = {"cfg_scale": args.cfg} if args.cfg is not None else {}
     pipe = Pipeline(PipelineConfig(planner=args.planner, tokenizer_run=args.tokenizer, planner_run=args.planner_run,
                                    device=args.device, generation=generation, plots=not args.no_plots,
-                                   realtime=args.realtime))
+                                   realtime=args.realtime, sim_video=args.sim_video))
     if args.prompts is not None:
         return _run_batch(pipe, prompts, args, robot, playback)
 
