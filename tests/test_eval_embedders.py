@@ -73,3 +73,29 @@ def test_official_embedder_reads_pos_tagged_captions(tmp_path):
         humanml3d_token_captions(tmp_path / "glove")
     with pytest.raises(InputError, match="does not exist"):
         humanml3d_token_captions(tmp_path / "missing")
+
+
+def test_corruptions_and_extra_negatives():
+    from motok_robot.eval.train_evaluator import corrupt, corrupted_copies
+
+    rng = np.random.default_rng(0)
+    x = np.arange(12, dtype=np.float32).reshape(6, 2)
+    np.testing.assert_array_equal(corrupt(x, "reverse", rng), x[::-1])
+    np.testing.assert_array_equal(corrupt(x, "freeze", rng), np.repeat(x[:1], 6, 0))
+    shuffled = corrupt(x, "shuffle", rng)
+    assert sorted(map(tuple, shuffled)) == sorted(map(tuple, x))
+    with pytest.raises(ValueError, match="unknown corruption"):
+        corrupt(x, "melt", rng)
+    feats = torch.zeros(4, 8, 2)
+    feats[:, :5] = torch.arange(5.0)[None, :, None] + 1
+    lengths = torch.tensor([5, 5, 5, 5])
+    bad, bad_len = corrupted_copies(feats, lengths, 2, rng)
+    assert bad.shape == (2, 8, 2) and bad_len.tolist() == [5, 5] and (bad[:, 5:] == 0).all()
+    # extra negatives can only make the text -> motion classification harder
+    model = tiny_evaluator()
+    t = torch.nn.functional.normalize(torch.randn(4, 16), dim=-1)
+    m = torch.nn.functional.normalize(torch.randn(4, 16), dim=-1)
+    same = torch.zeros(4, 4, dtype=torch.bool)
+    plain = model.contrastive_loss(t, m, same)
+    harder = model.contrastive_loss(t, m, same, torch.nn.functional.normalize(torch.randn(3, 16), dim=-1))
+    assert harder > plain

@@ -3,7 +3,9 @@
 HumanML3D's official evaluator cannot be downloaded here, so motok-robot trains its own
 (:class:`TextMotionEvaluator`): frozen sentence embeddings -> MLP on the text side, normalised
 263-d features -> strided conv + transformer on the motion side, trained with a symmetric
-InfoNCE loss (TMR-style) where captions identical to the positive are not used as negatives.
+InfoNCE loss (TMR-style) where captions identical to the positive are not used as negatives,
+and corrupted copies of some batch motions (frames shuffled, time reversed, frozen) are added
+as negatives for every caption, so the embedding also tells plausible from implausible motion.
 Embeddings are unit-norm ``[B, latent_dim]``.
 
 Files (a "run" directory): ``config.json`` (:class:`EvaluatorConfig` + data mean/std path
@@ -103,13 +105,20 @@ class TextMotionEvaluator(nn.Module):
         """Frozen sentence-encoder output ``[B, text_dim]`` -> unit embeddings ``[B, latent]``."""
         return self.text(sentence_embedding)
 
-    def contrastive_loss(self, text_z: torch.Tensor, motion_z: torch.Tensor, same_text: torch.Tensor) -> torch.Tensor:
-        """Symmetric InfoNCE; ``same_text[i, j]`` marks off-diagonal pairs that share a caption (not negatives)."""
-        logits = self.log_scale.exp().clamp(max=100.0) * text_z @ motion_z.T
+    def contrastive_loss(self, text_z: torch.Tensor, motion_z: torch.Tensor, same_text: torch.Tensor,
+                         extra_motion_z: torch.Tensor | None = None) -> torch.Tensor:
+        """Symmetric InfoNCE over ``[B, latent]`` text and motion embeddings.
+
+        ``same_text [B, B]`` marks off-diagonal pairs that share a caption (not negatives);
+        ``extra_motion_z [K, latent]`` (corrupted motions) are extra negatives for every text.
+        """
+        scale = self.log_scale.exp().clamp(max=100.0)
+        logits = scale * text_z @ motion_z.T
         eye = torch.eye(len(logits), dtype=torch.bool, device=logits.device)
         logits = logits.masked_fill(same_text & ~eye, float("-inf"))
         target = torch.arange(len(logits), device=logits.device)
-        return 0.5 * (F.cross_entropy(logits, target) + F.cross_entropy(logits.T, target))
+        text_to_motion = logits if extra_motion_z is None else torch.cat([logits, scale * text_z @ extra_motion_z.T], 1)
+        return 0.5 * (F.cross_entropy(text_to_motion, target) + F.cross_entropy(logits.T, target))
 
 
 def save_evaluator(model: TextMotionEvaluator, run_dir: str | Path) -> None:

@@ -74,6 +74,32 @@ class CaptionedClips:
         return torch.as_tensor(out), torch.as_tensor(lengths), self.caption_vectors[ids], ids
 
 
+CORRUPTIONS = ("shuffle", "reverse", "freeze")
+
+
+def corrupt(features: np.ndarray, kind: str, rng: np.random.Generator) -> np.ndarray:
+    """An implausible version of raw features ``[T, 263]``: frames in random order, played
+    backwards, or the first frame held (same poses, wrong or no motion)."""
+    if kind == "shuffle":
+        return features[rng.permutation(len(features))]
+    if kind == "reverse":
+        return features[::-1].copy()
+    if kind == "freeze":
+        return np.repeat(features[:1], len(features), axis=0)
+    raise ValueError(f"unknown corruption {kind!r}; use one of {CORRUPTIONS}")
+
+
+def corrupted_copies(feats: torch.Tensor, lengths: torch.Tensor, count: int, rng: np.random.Generator):
+    """Corrupted copies of ``count`` random rows of a padded batch ``[B, T, 263]`` (+ lengths)."""
+    rows = rng.choice(len(feats), size=min(count, len(feats)), replace=False)
+    out = torch.zeros((len(rows), *feats.shape[1:]), dtype=feats.dtype)
+    for k, row in enumerate(rows):
+        n = int(lengths[row])
+        kind = CORRUPTIONS[int(rng.integers(len(CORRUPTIONS)))]
+        out[k, :n] = torch.as_tensor(corrupt(feats[row, :n].numpy(), kind, rng))
+    return out, lengths[torch.as_tensor(rows)]
+
+
 @torch.no_grad()
 def validation_r_precision(model: TextMotionEvaluator, clips: CaptionedClips, cfg: EvaluatorConfig) -> np.ndarray:
     model.eval()
@@ -169,8 +195,14 @@ def train_evaluator(
             feats, lengths, caption_vecs, caption_ids = train.batch(indices, rng, cfg)
             same = caption_ids[:, None] == caption_ids[None, :]
             text_z = model.embed_text(caption_vecs.to(device))
-            motion_z = model.embed_motion(feats.to(device), lengths.to(device))
-            loss = model.contrastive_loss(text_z, motion_z, same.to(device))
+            n_bad = int(round(cfg.corrupt_negatives * len(indices)))
+            if n_bad:
+                bad_feats, bad_lengths = corrupted_copies(feats, lengths, n_bad, rng)
+                all_z = model.embed_motion(torch.cat([feats, bad_feats]).to(device), torch.cat([lengths, bad_lengths]).to(device))
+                motion_z, bad_z = all_z[: len(indices)], all_z[len(indices) :]
+            else:
+                motion_z, bad_z = model.embed_motion(feats.to(device), lengths.to(device)), None
+            loss = model.contrastive_loss(text_z, motion_z, same.to(device), bad_z)
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
