@@ -84,6 +84,8 @@ def test_corruptions_and_extra_negatives():
     np.testing.assert_array_equal(corrupt(x, "freeze", rng), np.repeat(x[:1], 6, 0))
     shuffled = corrupt(x, "shuffle", rng)
     assert sorted(map(tuple, shuffled)) == sorted(map(tuple, x))
+    jittered = corrupt(x, "jitter", rng)
+    assert jittered.shape == x.shape and not np.allclose(jittered, x) and np.abs(jittered - x).max() < 10
     with pytest.raises(ValueError, match="unknown corruption"):
         corrupt(x, "melt", rng)
     feats = torch.zeros(4, 8, 2)

@@ -25,8 +25,8 @@ class EvaluatorConfig:
     heads: int = 4
     dropout: float = 0.1
     temperature: float = 0.07
-    #: share of each batch whose motion gets a corrupted copy (frames shuffled, time reversed or
-    #: frozen) used as an extra negative for every caption (0 = plain InfoNCE)
+    #: share of each batch whose motion gets a corrupted copy (frames shuffled, time reversed,
+    #: frozen or jittered) used as an extra negative for every caption (0 = plain InfoNCE)
     corrupt_negatives: float = 0.25
     min_frames: int = 40  # 2 s at 20 fps
     max_frames: int = 196  # 9.8 s, as HumanML3D

@@ -4,7 +4,7 @@ HumanML3D's official evaluator cannot be downloaded here, so motok-robot trains 
 (:class:`TextMotionEvaluator`): frozen sentence embeddings -> MLP on the text side, normalised
 263-d features -> strided conv + transformer on the motion side, trained with a symmetric
 InfoNCE loss (TMR-style) where captions identical to the positive are not used as negatives,
-and corrupted copies of some batch motions (frames shuffled, time reversed, frozen) are added
+and corrupted copies of some batch motions (frames shuffled, time reversed, frozen, jittered) are added
 as negatives for every caption, so the embedding also tells plausible from implausible motion.
 Embeddings are unit-norm ``[B, latent_dim]``.
 

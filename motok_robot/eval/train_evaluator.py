@@ -74,12 +74,16 @@ class CaptionedClips:
         return torch.as_tensor(out), torch.as_tensor(lengths), self.caption_vectors[ids], ids
 
 
-CORRUPTIONS = ("shuffle", "reverse", "freeze")
+CORRUPTIONS = ("shuffle", "reverse", "freeze", "jitter")
 
 
 def corrupt(features: np.ndarray, kind: str, rng: np.random.Generator) -> np.ndarray:
     """An implausible version of raw features ``[T, 263]``: frames in random order, played
-    backwards, or the first frame held (same poses, wrong or no motion)."""
+    backwards, the first frame held (same poses, wrong or no motion), or per-frame noise of
+    half each feature's spread over the clip (jitter)."""
+    if kind == "jitter":
+        scale = 0.5 * features.std(axis=0, keepdims=True) + 1e-3
+        return (features + scale * rng.normal(size=features.shape)).astype(features.dtype)
     if kind == "shuffle":
         return features[rng.permutation(len(features))]
     if kind == "reverse":
