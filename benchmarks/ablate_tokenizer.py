@@ -46,7 +46,7 @@ CONFIGS = {
 EXTRAS = {
     "diffusion_ds4_k3_eps": {"parameterisation": "eps"},
     "diffusion_ds4_k3_emphasis": {"emphasis": True},
-    "diffusion_ds4_k3_geometric": {"joint_weight": 1.0, "velocity_weight": 1.0, "foot_weight": 1.0},
+    "diffusion_ds4_k3_geometric": {"joint_weight": 100.0, "velocity_weight": 100.0, "foot_weight": 100.0},  # m^2 units
 }
 COLUMNS = (
     ("name", "config", "{:<28}"),

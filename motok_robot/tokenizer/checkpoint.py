@@ -109,4 +109,6 @@ def load_tokenizer(run_dir: str | Path, device: str | torch.device | None = None
     model.load_state_dict(state)
     if device is None:
         device = "cuda" if torch.cuda.is_available() else "cpu"
+    if str(device).startswith("cuda") and not torch.cuda.is_available():
+        raise InputError(f"device {device!r} requested but CUDA is not available")
     return model.to(device).eval()
