@@ -507,9 +507,12 @@ class Pipeline:
                                       playback, port, force, render, self.config.plots if plots is None else plots)
         except BaseException as exc:  # noqa: BLE001 - every failure leaves OUT.failed, never a complete-looking OUT
             self._fail(tmp, out, state["stage"], exc)
+            where = f"{state['stage']} stage failed"
             if isinstance(exc, MotokError):
-                raise type(exc)(f"{state['stage']} stage failed: {exc} (partial files in {out}.failed)") from exc
-            raise
+                raise type(exc)(f"{where}: {exc} (partial files in {out}.failed)") from exc
+            if isinstance(exc, Exception):  # a library error: one line for the user, the cause stays chained
+                raise MotokError(f"{where}: {type(exc).__name__}: {exc} (partial files in {out}.failed)") from exc
+            raise  # KeyboardInterrupt / SystemExit
         finally:
             if bar is not None:
                 bar.close()
@@ -781,23 +784,32 @@ class Pipeline:
                 except InputError as exc:
                     raise InputError(f"prompt on line {spec.line}: {exc}") from None
         out.mkdir(parents=True, exist_ok=True)
+        rows = []
+        try:
+            for i, spec in enumerate(tqdm(prompts, desc="prompts", unit="prompt", disable=None if progress is None
+                                          else not progress)):
+                folder = f"{i:03d}_{slug(spec.text)}"
+                row = {"index": i, "text": spec.text, "seed": spec.seed, "folder": folder}
+                try:
+                    res = self.run(spec.text, robot=robot, seconds=spec.seconds, seed=spec.seed,
+                                   out_dir=out / folder, playback=playback, render=render, overwrite=True)
+                except Exception as exc:  # noqa: BLE001 - record it and go on with the list
+                    failed = out / f"{folder}.failed"
+                    row.update(passed=False, error=str(exc), seconds=spec.seconds,
+                               folder=failed.name if failed.is_dir() else "")
+                else:
+                    row.update(seconds=round(res.seconds, 3), passed=res.passed,
+                               failed_checks=";".join(res.failed_checks), playback=res.playback.status,
+                               **{f"{k}_s": round(v, 3) for k, v in res.timings.items() if k in (*STAGES, "total")})
+                rows.append(row)
+        finally:  # also after Ctrl-C: the rows of the prompts that ran
+            self._write_summary_csv(out, rows)
+        return out / "summary.csv"
+
+    @staticmethod
+    def _write_summary_csv(out: Path, rows: list[dict]) -> None:
         columns = ["index", "text", "seconds", "seed", "folder", "passed", "failed_checks", "playback",
                    *(f"{s}_s" for s in (*STAGES, "total")), "error"]
-        rows = []
-        for i, spec in enumerate(tqdm(prompts, desc="prompts", unit="prompt", disable=None if progress is None
-                                      else not progress)):
-            folder = f"{i:03d}_{slug(spec.text)}"
-            row = {"index": i, "text": spec.text, "seed": spec.seed, "folder": folder}
-            try:
-                res = self.run(spec.text, robot=robot, seconds=spec.seconds, seed=spec.seed, out_dir=out / folder,
-                               playback=playback, render=render, overwrite=True)
-            except MotokError as exc:
-                row.update(passed=False, error=str(exc), seconds=spec.seconds)
-            else:
-                row.update(seconds=round(res.seconds, 3), passed=res.passed, failed_checks=";".join(res.failed_checks),
-                           playback=res.playback.status,
-                           **{f"{k}_s": round(v, 3) for k, v in res.timings.items() if k in (*STAGES, "total")})
-            rows.append(row)
         buffer = io.StringIO()
         writer = csv.DictWriter(buffer, fieldnames=columns, extrasaction="ignore")
         writer.writeheader()
@@ -807,7 +819,6 @@ class Pipeline:
         part = out / ".summary.csv.partial"
         part.write_text(buffer.getvalue(), encoding="utf-8")
         os.replace(part, path)
-        return path
 
 
 # ----------------------------------------------------------------------------- summary.md

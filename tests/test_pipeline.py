@@ -405,6 +405,34 @@ def test_prompts_file_runs_a_list_and_writes_summary_csv(runs, tmp_path, capsys)
     assert "prompts passed validation" in capsys.readouterr().out
 
 
+def test_batch_records_a_failing_prompt_and_goes_on(pipe, tmp_path, monkeypatch):
+    """A library error inside a stage becomes a one-line MotokError; the list goes on."""
+    from motok_robot.pipeline import PromptSpec
+
+    entry = pipe.robot("op3_like")
+    original = entry["retargeter"].run
+    calls = []
+
+    def first_call_breaks(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 1:
+            raise RuntimeError("Error in Function::call for 'solver' [IpoptInterface]")
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(entry["retargeter"], "run", first_call_breaks)
+    path = pipe.run_batch([PromptSpec("a person bows", SECONDS, 0), PromptSpec("a person walks forward", SECONDS, 1)],
+                          tmp_path / "b", progress=False)
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert rows[0]["error"].startswith("retarget stage failed: RuntimeError: Error in Function::call")
+    assert "\n" not in rows[0]["error"] and rows[0]["passed"] == "False"
+    assert rows[0]["folder"] == "000_a_person_bows.failed"
+    assert (tmp_path / "b" / "000_a_person_bows.failed" / "FAILED.txt").is_file()
+    assert rows[1]["error"] == "" and (tmp_path / "b" / rows[1]["folder"] / "summary.md").is_file()
+    assert sorted(p.name for p in (tmp_path / "b").iterdir()) == [
+        "000_a_person_bows.failed", "001_a_person_walks_forward", "summary.csv"]
+
+
 def test_read_prompts_plain_and_errors(tmp_path):
     from motok_robot.pipeline import read_prompts
 
