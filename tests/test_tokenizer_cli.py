@@ -105,3 +105,14 @@ def test_reconstruct_default_split(tmp_path, split):
     save_tokenizer(tok, tmp_path / "run")
     result = reconstruct_dataset(tok.eval(), data, split, progress=False)
     assert result["clips"] == 2 and result["steps"] == 0 and result["decoder"] == "conv"
+
+
+def test_cli_module_and_configs_do_not_import_torch():
+    import subprocess
+    import sys
+
+    code = ("import sys, motok_robot.tokenizer.cli, motok_robot.tokenizer\n"
+            "from motok_robot.tokenizer import TokenizerConfig, TrainConfig\n"
+            "TokenizerConfig(); TrainConfig()\n"
+            "assert 'torch' not in sys.modules, 'torch imported'\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
