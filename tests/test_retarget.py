@@ -449,3 +449,14 @@ def test_soft_com_term_pulls_com_over_support(robot, small):
     b = with_com.run(human, 20.0, progress=False)
     assert b.success
     assert com_offset(with_com, b) < 0.8 * com_offset(small, a)
+
+
+def test_bvh_mocap_input_is_imported_and_retargeted(robot, small, tmp_path):
+    fixtures = pytest.importorskip("test_data_fixtures")  # the data stage's BVH writer
+    path = tmp_path / "walk.bvh"
+    names = {k: v for k, v in fixtures.BANDAI_NAMES.items()}
+    path.write_text(fixtures.canonical_bvh_text(frames=45, fps=30.0, names=names, skip=("spine3",)))
+    motion = read_input(path, skeleton="bandai")
+    assert motion.joints.shape == (30, 22, 3) and motion.fps == 20.0
+    res = small.run(motion.joints, motion.fps, progress=False)
+    assert res.success and res.qpos.shape == (30, robot.nq)
