@@ -125,7 +125,8 @@ class PlaybackSummary:
 
     @property
     def ok(self) -> bool:
-        return self.status == "completed" and not self.fell
+        """Played to the end (or nothing to play on a robot without servos) and did not fall."""
+        return self.status in ("completed", "skipped") and not self.fell
 
 
 @dataclass
@@ -492,6 +493,9 @@ class Pipeline:
         entry = self.robot(req["robot"])
         if time.perf_counter() - t > 1e-3:
             timings["setup"] = time.perf_counter() - t
+        if playback == "port" and not entry["robot"].servos:
+            raise InputError(f"robot {entry['robot'].name} has no servo map ([servos] in its description); "
+                             "it cannot play on hardware")
         out: Path = req["out_dir"]
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = out.parent / f".{out.name}.partial-{os.getpid()}-{uuid.uuid4().hex[:8]}"

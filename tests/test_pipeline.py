@@ -199,6 +199,13 @@ def test_invalid_input_is_one_error_and_writes_nothing(pipe, tmp_path, change, m
     assert list(tmp_path.iterdir()) == []
 
 
+def test_hardware_playback_needs_a_robot_with_servos(pipe, tmp_path):
+    with pytest.raises(InputError, match="humanoid25 has no servo map"):
+        pipe.run("a person walks forward", robot="humanoid25", seconds=SECONDS, out_dir=tmp_path / "h",
+                 playback="port", port="/dev/null", render=False)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_unwritable_or_occupied_output_folder(pipe, tmp_path):
     blocker = tmp_path / "a_file"
     blocker.write_text("x")
@@ -463,10 +470,12 @@ def test_text_limit_matches_the_text_encoder_and_import_is_light():
     import subprocess
     import sys
 
-    from motok_robot.pipeline import MAX_TEXT_CHARS
+    import motok_robot
+    from motok_robot.pipeline import MAX_TEXT_CHARS, Pipeline
     from motok_robot.text import MAX_TEXT_CHARS as TEXT_LIMIT
 
     assert MAX_TEXT_CHARS == TEXT_LIMIT
+    assert motok_robot.Pipeline is Pipeline
     code = ("import sys, motok_robot.pipeline, motok_robot.pipeline_cli; "
             "print(sorted(m for m in ('torch', 'mujoco', 'casadi', 'matplotlib') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
