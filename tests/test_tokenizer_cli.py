@@ -70,9 +70,10 @@ def test_train_resume_and_reconstruct(tmp_path, capsys):
 
     out = tmp_path / "rec.json"
     assert main(["eval", "reconstruct", "--data", str(data), "--tokenizer", str(run), "--split", "all",
-                 "--device", "cpu", "--json", str(out)]) == 0
+                 "--device", "cpu", "--json", str(out), "--plot", str(tmp_path / "rec.png")]) == 0
+    assert (tmp_path / "rec.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     result = json.loads(out.read_text())
-    assert result["clips"] == 7 and result["split"] == "all"
+    assert result["clips"] == 7 and result["split"] == "all" and len(result["clip_errors"]) == 7
     for key in ("mpjpe_cm", "mpjpe_root_aligned_cm", "root_trajectory_error_cm", "foot_skating_ratio_reconstructed",
                 "foot_skating_ratio_original", "codebook_usage", "perplexity", "tokens_per_second"):
         assert np.isfinite(result[key]), key

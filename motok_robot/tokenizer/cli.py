@@ -53,6 +53,8 @@ def register(commands, groups) -> None:
     rec.add_argument("--limit", type=int, default=None, help="evaluate the first N clips only")
     rec.add_argument("--device", default=None, help="cpu or cuda (default: cuda if available)")
     rec.add_argument("--json", type=Path, default=None, help="also write the metrics to this JSON file")
+    rec.add_argument("--plot", type=Path, default=None,
+                     help="PNG of the worst, median and best clips: root path, MPJPE per frame, foot heights")
     rec.set_defaults(func=_reconstruct)
 
 
@@ -110,6 +112,15 @@ def _reconstruct(args) -> int:
     for key in keys:
         value = result[key]
         print(f"{key:<{width}}  {value:.4g}" if isinstance(value, float) and math.isfinite(value) else f"{key:<{width}}  {value}")
+    if args.plot:
+        from motok_robot.data.dataset import PreparedDataset
+        from motok_robot.tokenizer.evaluate import plot_reconstructions
+
+        ranked = [c["id"] for c in result["clip_errors"]]
+        chosen = list(dict.fromkeys([ranked[0], ranked[len(ranked) // 2], ranked[-1]]))
+        dataset = PreparedDataset(args.data, args.split)
+        plot_reconstructions(tokenizer, [(i, dataset.features(i)) for i in chosen], args.plot, steps=args.steps, seed=args.seed)
+        print(f"wrote {args.plot}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2) + "\n")

@@ -47,7 +47,8 @@ def reconstruct_clips(
     progress: bool | None = None,
 ) -> dict[str, Any]:
     """Reconstruct ``(id, features [T, 263])`` clips; return the metrics dict described above
-    plus ``worst_clips`` (the five highest world-frame MPJPE, cm)."""
+    plus ``worst_clips`` (the five highest world-frame MPJPE, cm) and ``clip_errors`` (every
+    clip's MPJPE, worst first)."""
     if not clips:
         raise InputError("reconstruct: no clips to evaluate")
     fps = tokenizer.config.fps
@@ -110,6 +111,7 @@ def reconstruct_clips(
         "steps": int(steps or tokenizer.config.sample_steps) if tokenizer.config.decoder == "diffusion" else 0,
         "seed": seed,
         "worst_clips": [{"id": cid, "mpjpe_cm": e} for e, cid in per_clip[:5]],
+        "clip_errors": [{"id": cid, "mpjpe_cm": e} for e, cid in per_clip],  # all clips, worst first
     }
 
 
@@ -153,3 +155,54 @@ def machine_description() -> dict[str, Any]:
     if torch.cuda.is_available():
         info["cuda_device"] = torch.cuda.get_device_name(0)
     return info
+
+
+@torch.no_grad()
+def plot_reconstructions(
+    tokenizer: MoTok, clips: list[tuple[str, np.ndarray]], path: str | Path, steps: int | None = None, seed: int = 0
+) -> Path:
+    """PNG with one row per clip: root path (x, y; m) of the original and the reconstruction,
+    per-frame MPJPE (cm, world frame and root-aligned), and foot heights (m) over time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    fps = tokenizer.config.fps
+    fig, axes = plt.subplots(len(clips), 3, figsize=(15, 3.6 * len(clips)), squeeze=False)
+    for row, (clip_id, feats) in zip(axes, clips):
+        x = torch.from_numpy(np.asarray(feats, dtype=np.float32))[None].to(tokenizer.device)
+        y = tokenizer.reconstruct(x, steps=steps, seed=seed)
+        j_orig = joints_from_features(np.asarray(feats, dtype=np.float32))
+        j_rec = joints_from_features(y[0].cpu().numpy())
+        seconds = np.arange(len(j_orig)) / fps
+        row[0].plot(j_orig[:, 0, 0], j_orig[:, 0, 1], "k-", label="original")
+        row[0].plot(j_rec[:, 0, 0], j_rec[:, 0, 1], "r--", label="reconstruction")
+        row[0].plot(j_orig[:1, 0, 0], j_orig[:1, 0, 1], "ko")
+        row[0].set_aspect("equal", adjustable="datalim")
+        row[0].set_title(f"{clip_id}: root path")
+        row[0].set_xlabel("x (m)")
+        row[0].set_ylabel("y (m)")
+        row[0].legend(fontsize=8)
+        world = np.linalg.norm(j_rec - j_orig, axis=-1).mean(-1) * 100
+        aligned = np.linalg.norm((j_rec - j_rec[:, :1]) - (j_orig - j_orig[:, :1]), axis=-1).mean(-1) * 100
+        row[1].plot(seconds, world, label=f"world (mean {world.mean():.1f})")
+        row[1].plot(seconds, aligned, label=f"root-aligned (mean {aligned.mean():.1f})")
+        row[1].set_title("MPJPE per frame")
+        row[1].set_xlabel("time (s)")
+        row[1].set_ylabel("cm")
+        row[1].legend(fontsize=8)
+        for joint, name, colour in ((10, "left foot", "tab:blue"), (11, "right foot", "tab:orange")):
+            row[2].plot(seconds, j_orig[:, joint, 2], "-", color=colour, label=f"{name} original")
+            row[2].plot(seconds, j_rec[:, joint, 2], "--", color=colour, label=f"{name} reconstruction")
+        row[2].set_title("foot height")
+        row[2].set_xlabel("time (s)")
+        row[2].set_ylabel("z (m)")
+        row[2].legend(fontsize=7)
+    fig.suptitle(f"MoTok reconstruction ({tokenizer.config.decoder} decoder, {tokenizer.config.fps / tokenizer.frames_per_token:g} tokens/s)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
