@@ -76,7 +76,8 @@ def test_official_embedder_reads_pos_tagged_captions(tmp_path):
 
 
 def test_corruptions_and_extra_negatives():
-    from motok_robot.eval.train_evaluator import corrupt, corrupted_copies
+    from motok_robot.eval.corruptions import corrupt
+    from motok_robot.eval.train_evaluator import corrupted_copies
 
     rng = np.random.default_rng(0)
     x = np.arange(12, dtype=np.float32).reshape(6, 2)

@@ -31,7 +31,8 @@ from motok_robot.eval.protocol import (
 from motok_robot.eval.sanity import evaluator_sanity, format_sanity, frozen_windows
 
 SIG = 8
-MOVING = 4.0 * np.linspace(0.0, 1.0, 60).std()  # the motion embedding's last entry for a moving clip
+MOVING = 4.0 * np.linspace(0.0, 1.0, 60).std()  # the motion embedding's spread entry for a moving clip
+STEP = 10.0 / 59  # ... and its step entries
 
 
 def make_clips(n: int, seed: int, prefix: str = "clip", lengths=(40, 80)) -> tuple[list[EvalClip], dict[str, np.ndarray]]:
@@ -58,11 +59,17 @@ class ToyEmbedder:
         self.signatures = signatures
 
     def embed_text(self, captions):
-        z = np.stack([np.r_[self.signatures[c], MOVING] for c in captions])
+        z = np.stack([np.r_[self.signatures[c], MOVING, STEP, 4 * STEP] for c in captions])
         return z / np.linalg.norm(z, axis=1, keepdims=True)
 
     def embed_motion(self, features):
-        z = np.stack([np.r_[f[:, :SIG].mean(0), 4.0 * f[:, SIG].std()] for f in features])
+        """Mean signature, spread, mean |step| and mean signed step of the moving dimension
+        (so freezing, shuffling, reversing and jitter all move the embedding)."""
+        rows = []
+        for f in features:
+            step = np.diff(f[:, SIG])
+            rows.append(np.r_[f[:, :SIG].mean(0), 4.0 * f[:, SIG].std(), 10 * np.abs(step).mean(), 40 * step.mean()])
+        z = np.stack(rows)
         return z / np.linalg.norm(z, axis=1, keepdims=True)
 
 
@@ -119,7 +126,7 @@ def test_oracle_generator_matches_the_reference_row_and_wrong_clips_fall_to_chan
     for row in (wrong, control):
         assert row.metrics["r_precision_top1"].mean < 0.1, row.name
         assert row.metrics["mm_dist"].mean > 2 * real.metrics["mm_dist"].mean, row.name
-    assert wrong.metrics["fid"].mean < 0.05  # the same set of real motions, only mismatched
+    assert wrong.metrics["fid"].mean < 0.1  # real motions (tiled to length), only mismatched
     # the reference FID compares two real sets from the same distribution: small next to a frozen set
     assert "fid" in real.metrics and "fid" not in control.metrics and "multimodality" not in real.metrics
     assert 0 < real.metrics["fid"].mean < 0.5
@@ -219,17 +226,31 @@ def test_sanity_passes_for_a_matching_evaluator_and_fails_for_a_blind_one():
     clips, sigs = make_clips(64, 5)
     reference, ref_sigs = make_clips(64, 6, prefix="train")
     embedder = ToyEmbedder({**sigs, **ref_sigs})
-    report = evaluator_sanity(clips, embedder, CFG, reference)
-    assert report.passed, format_sanity(report)
+    floor, floor_sigs = make_clips(64, 7, prefix="floor")
+    embedder = ToyEmbedder({**sigs, **ref_sigs, **floor_sigs})
+    report = evaluator_sanity(clips, embedder, CFG, reference, floor)
+    text = format_sanity(report)
+    assert report.passed, text
     assert report.checks["fid_test_vs_train_small"]["fid_frozen"] > 10 * report.checks["fid_test_vs_train_small"]["fid_test_vs_train"]
-    assert "Sanity: PASSED" in format_sanity(report)
+    assert set(report.values["fid_corrupted"]) == {"shuffle", "reverse", "freeze", "jitter"}
+    assert report.checks["corruptions_detected"]["passed"] and report.values["fid_train_vs_train"] > 0
+    assert "Sanity: PASSED" in text and "FID: fid_train_vs_train" in text
+    assert "multimodality" not in format_table(report.result)  # no generator: no multimodality note
+
+    class TimeBlind(ToyEmbedder):  # sees only the mean pose: frame order and freezing go unnoticed
+        def embed_motion(self, features):
+            z = np.stack([np.r_[f[:, :SIG].mean(0), MOVING, STEP, 4 * STEP] for f in features])
+            return z / np.linalg.norm(z, axis=1, keepdims=True)
+
+    blind_time = evaluator_sanity(clips, TimeBlind(embedder.signatures), CFG, reference, floor)
+    assert not blind_time.checks["corruptions_detected"]["passed"]
 
     class Blind(ToyEmbedder):  # captions embedded at random: no text-motion relation
         def embed_text(self, captions):
-            z = np.stack([np.random.default_rng(zlib.crc32(c.encode())).normal(size=SIG + 1) for c in captions])
+            z = np.stack([np.random.default_rng(zlib.crc32(c.encode())).normal(size=SIG + 3) for c in captions])
             return z / np.linalg.norm(z, axis=1, keepdims=True)
 
-    blind = evaluator_sanity(clips, Blind({**sigs, **ref_sigs}), CFG, reference)
+    blind = evaluator_sanity(clips, Blind(embedder.signatures), CFG, reference)
     assert not blind.passed and not blind.checks["matched_above_chance"]["passed"]
     assert "FAIL" in format_sanity(blind)
 

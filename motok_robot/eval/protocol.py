@@ -281,7 +281,7 @@ def run_protocol(
             raise InputError(f"generator name {name!r} is reserved")
     n = len(clips)
     div_times = min(cfg.diversity_times, n)
-    mm_texts = min(cfg.mm_texts, n) if cfg.mm_repeats else 0
+    mm_texts = min(cfg.mm_texts, n) if cfg.mm_repeats and generators else 0
     values: dict[str, dict[str, list[float]]] = {REFERENCE_ROW: {}, CONTROL_ROW: {}, **{g: {} for g in generators}}
 
     def put(row: str, scores: dict[str, float]) -> None:

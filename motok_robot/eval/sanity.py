@@ -6,6 +6,10 @@ An evaluator is worth using when (issue 10's acceptance):
   gives ``fid_frozen``, the FID between the real test windows and the same windows frozen at
   their first frame (a clearly wrong "motion" with the right poses); the check asks for
   ``fid_test_vs_train < fid_frozen / 10``;
+* the FID notices implausible motion: for each corruption of :mod:`motok_robot.eval.corruptions`
+  (frames shuffled, time reversed, frozen, jittered) the FID between the real test windows and
+  their corrupted copies exceeds 3x ``fid_train_vs_train``, the FID of two disjoint train
+  samples as large as the test set (the floor that sample size allows);
 * R-precision collapses with shuffled captions: top-1 below twice chance (2/32), while the
   matched top-1 is at least three times chance;
 * results repeat: the same seed gives identical numbers, and a different sampling seed gives
@@ -22,6 +26,7 @@ import numpy as np
 
 from motok_robot.eval import metrics
 from motok_robot.eval.config import GenerationEvalConfig
+from motok_robot.eval.corruptions import CORRUPTIONS, corrupt
 from motok_robot.eval.protocol import CONTROL_ROW, METRICS, REFERENCE_ROW, EvalClip, EvalResult, draw, run_protocol
 
 #: share of row/metric means that must agree within the summed CIs between two sampling seeds
@@ -32,13 +37,14 @@ MIN_AGREEMENT = 0.8
 class SanityReport:
     result: EvalResult
     checks: dict[str, dict] = field(default_factory=dict)
+    values: dict = field(default_factory=dict)
 
     @property
     def passed(self) -> bool:
         return all(c["passed"] for c in self.checks.values())
 
     def to_dict(self) -> dict:
-        return {**self.result.to_dict(), "sanity": {"passed": self.passed, "checks": self.checks}}
+        return {**self.result.to_dict(), "sanity": {"passed": self.passed, "values": self.values, "checks": self.checks}}
 
 
 def frozen_windows(windows: Sequence[np.ndarray]) -> list[np.ndarray]:
@@ -60,10 +66,25 @@ def repeat_agreement(a: EvalResult, b: EvalResult, rows: Sequence[str] = (REFERE
     return out
 
 
+def corruption_fids(windows: Sequence[np.ndarray], real_z: np.ndarray, embedder, seed: int = 0) -> dict[str, float]:
+    """FID between real windows (embedded as ``real_z``) and each corrupted copy of them."""
+    out = {}
+    for k, kind in enumerate(CORRUPTIONS):
+        rng = np.random.default_rng([seed, k])
+        out[kind] = metrics.fid(real_z, embedder.embed_motion([corrupt(w, kind, rng) for w in windows]))
+    return out
+
+
 def evaluator_sanity(clips: Sequence[EvalClip], embedder, cfg: GenerationEvalConfig | None = None,
-                     reference_clips: Sequence[EvalClip] | None = None) -> SanityReport:
+                     reference_clips: Sequence[EvalClip] | None = None,
+                     floor_clips: Sequence[EvalClip] | None = None) -> SanityReport:
     """Run the protocol without generators three times (seed, the same seed again, seed + 1)
-    and compute the checks listed in the module docstring."""
+    and compute the checks listed in the module docstring.
+
+    ``reference_clips``: train clips (as many as test clips) for the test-vs-train FID;
+    ``floor_clips``: another, disjoint set of train clips of the same size, for the FID two
+    samples of one distribution reach (the floor the corruption FIDs are compared with).
+    """
     cfg = cfg or GenerationEvalConfig()
     first = run_protocol(clips, embedder, None, cfg, reference_clips, progress=False)
     again = run_protocol(clips, embedder, None, cfg, reference_clips, progress=False)
@@ -74,12 +95,26 @@ def evaluator_sanity(clips: Sequence[EvalClip], embedder, cfg: GenerationEvalCon
 
     windows = draw(list(clips), np.random.default_rng([cfg.seed, 0]), embedder.max_frames).windows(list(clips))
     real_z = embedder.embed_motion(windows)
-    fid_frozen = metrics.fid(real_z, embedder.embed_motion(frozen_windows(windows)))
+    corrupted = corruption_fids(windows, real_z, embedder, cfg.seed)
+    report.values["fid_corrupted"] = corrupted
+    floor = None
+    if reference_clips and floor_clips:
+        za = embedder.embed_motion(draw(list(reference_clips), np.random.default_rng([cfg.seed, 7]), embedder.max_frames).windows(list(reference_clips)))
+        zb = embedder.embed_motion(draw(list(floor_clips), np.random.default_rng([cfg.seed, 8]), embedder.max_frames).windows(list(floor_clips)))
+        floor = metrics.fid(za, zb)
+        report.values["fid_train_vs_train"] = floor
     if "fid" in ref.metrics:
         fid_tt = ref.metrics["fid"].mean
+        report.values["fid_test_vs_train"] = fid_tt
         report.checks["fid_test_vs_train_small"] = {
-            "passed": bool(fid_tt < fid_frozen / 10), "fid_test_vs_train": fid_tt, "fid_frozen": fid_frozen,
+            "passed": bool(fid_tt < corrupted["freeze"] / 10), "fid_test_vs_train": fid_tt,
+            "fid_frozen": corrupted["freeze"], "fid_train_vs_train": floor,
             "rule": "fid_test_vs_train < fid_frozen / 10"}
+    if floor is not None:
+        report.checks["corruptions_detected"] = {
+            "passed": all(v > 3 * floor for v in corrupted.values()), "fid_train_vs_train": floor,
+            **{f"fid_{k}": v for k, v in corrupted.items()},
+            "rule": "FID of every corruption > 3 x fid_train_vs_train"}
     r1, r1_shuffled = ref.metrics["r_precision_top1"].mean, ctl.metrics["r_precision_top1"].mean
     report.checks["matched_above_chance"] = {"passed": bool(r1 >= 3 * chance), "r_precision_top1": r1,
                                              "chance": chance, "rule": "top-1 >= 3 x chance"}
@@ -98,9 +133,14 @@ def evaluator_sanity(clips: Sequence[EvalClip], embedder, cfg: GenerationEvalCon
 
 def format_sanity(report: SanityReport) -> str:
     lines = [f"Sanity: {'PASSED' if report.passed else 'FAILED'}"]
+    v = report.values
+    if v:
+        fids = [f"{k} {v[k]:.4f}" for k in ("fid_train_vs_train", "fid_test_vs_train") if k in v]
+        fids += [f"{kind} {x:.4f}" for kind, x in v.get("fid_corrupted", {}).items()]
+        lines.append("FID: " + ", ".join(fids))
     for name, check in report.checks.items():
         facts = ", ".join(f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}"
-                          for k, v in check.items() if k not in ("passed", "rule", "metrics"))
+                          for k, v in check.items() if k not in ("passed", "rule", "metrics") and v is not None)
         if name == "other_seed_within_ci":
             bad = [k for k, v in check["metrics"].items() if not v["agree"]]
             facts += f", disagreeing: {bad or 'none'}"

@@ -24,6 +24,7 @@ from motok_robot.checkpoint import load_training_state, save_training_state
 from motok_robot.errors import InputError
 from motok_robot.eval import metrics
 from motok_robot.eval.config import EvaluatorConfig
+from motok_robot.eval.corruptions import CORRUPTIONS, corrupt
 from motok_robot.eval.evaluator import TextMotionEvaluator, save_evaluator
 
 TextEmbedder = Callable[[list[str]], np.ndarray]
@@ -72,25 +73,6 @@ class CaptionedClips:
             caption_ids[row] = self.caption_index[caption]
         ids = torch.as_tensor(caption_ids)
         return torch.as_tensor(out), torch.as_tensor(lengths), self.caption_vectors[ids], ids
-
-
-CORRUPTIONS = ("shuffle", "reverse", "freeze", "jitter")
-
-
-def corrupt(features: np.ndarray, kind: str, rng: np.random.Generator) -> np.ndarray:
-    """An implausible version of raw features ``[T, 263]``: frames in random order, played
-    backwards, the first frame held (same poses, wrong or no motion), or per-frame noise of
-    half each feature's spread over the clip (jitter)."""
-    if kind == "jitter":
-        scale = 0.5 * features.std(axis=0, keepdims=True) + 1e-3
-        return (features + scale * rng.normal(size=features.shape)).astype(features.dtype)
-    if kind == "shuffle":
-        return features[rng.permutation(len(features))]
-    if kind == "reverse":
-        return features[::-1].copy()
-    if kind == "freeze":
-        return np.repeat(features[:1], len(features), axis=0)
-    raise ValueError(f"unknown corruption {kind!r}; use one of {CORRUPTIONS}")
 
 
 def corrupted_copies(feats: torch.Tensor, lengths: torch.Tensor, count: int, rng: np.random.Generator):
