@@ -235,6 +235,9 @@ def test_cli_invalid_input_is_one_line_before_any_work(runs, tmp_path, capsys):
         (["run", "a person walks", "--out", "/proc/motok_out"], "cannot be written"),
         (["run", "a person walks", "--force", "--out", str(out)], "--force only applies"),
         (["run", "--out", str(out)], "give a TEXT prompt"),
+        (["run", "a person walks", "--prompts", str(tmp_path / "p.txt"), "--out", str(out)], "not both"),
+        (["run", "--prompts", str(tmp_path / "p.txt"), "--out", str(out)], "file not found"),
+        (["run", "a person walks", "--sim-video", "--out", str(out)], "--sim-video needs --sim"),
     ]
     for argv, message in cases:
         assert main(argv + _model_args(runs)) == 2, argv
