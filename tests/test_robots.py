@@ -368,9 +368,10 @@ def test_broken_mjcf_is_an_input_error(tmp_path):
 
 
 def test_models_folder_override(tmp_path, monkeypatch):
+    (tmp_path / "mjcf").mkdir()
     for suffix in (".xml", ".toml"):
         src = models_dir() / f"op3_like{suffix}"
-        (tmp_path / f"mybot{suffix}").write_text(src.read_text().replace('mjcf = "op3_like.xml"', 'mjcf = "mybot.xml"'))
+        (tmp_path / "mjcf" / f"mybot{suffix}").write_text(src.read_text().replace('mjcf = "op3_like.xml"', 'mjcf = "mybot.xml"'))
     monkeypatch.setenv(MODELS_ENV, str(tmp_path))
     assert list_robots() == ["mybot"]
     assert load("mybot").nj == 20

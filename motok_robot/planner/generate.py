@@ -17,7 +17,6 @@ so repeated calls pay only for generation.
 from __future__ import annotations
 
 import math
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +26,7 @@ import torch
 
 from motok_robot.errors import InputError
 from motok_robot.motion.skeleton import FPS
+from motok_robot.paths import models_dir
 from motok_robot.planner.config import PLANNER_KINDS, SampleConfig
 from motok_robot.text.base import MAX_TEXT_CHARS
 
@@ -37,10 +37,6 @@ TRAIN_HINT = {
 }
 
 
-def models_dir() -> Path:
-    """``$MOTOK_ROBOT_MODELS`` or ``models/`` at the repository root."""
-    env = os.environ.get("MOTOK_ROBOT_MODELS")
-    return Path(env) if env else Path(__file__).resolve().parents[2] / "models"
 
 
 def default_run(what: str) -> Path:

@@ -11,7 +11,7 @@ import math
 
 def register(commands, groups) -> None:
     robots = groups["robots"]
-    p = robots.add_parser("list", help="list the robot models", description="List the robots in models/mjcf (or $MOTOK_ROBOT_MODELS).")
+    p = robots.add_parser("list", help="list the robot models", description="List the robots in models/mjcf (or $MOTOK_ROBOT_MODELS/mjcf).")
     p.set_defaults(func=cmd_list)
 
     p = robots.add_parser(

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from motok_robot.paths import MODELS_ENV, robots_dir  # noqa: F401 (MODELS_ENV re-exported)
 from motok_robot.errors import InputError
 from motok_robot.robots.description import (
     BusSpec,
@@ -26,18 +27,13 @@ from motok_robot.robots.description import (
     parse_description,
 )
 
-#: environment variable naming a folder of robot files that replaces ``<repo>/models/mjcf``
-MODELS_ENV = "MOTOK_ROBOT_MODELS"
 #: the robot used when a command is not told which one (the Dynamixel-driven OP3-class humanoid)
 DEFAULT_ROBOT = "op3_like"
 
 
 def models_dir() -> Path:
-    """The folder holding ``NAME.xml`` + ``NAME.toml`` (``$MOTOK_ROBOT_MODELS`` or ``<repo>/models/mjcf``)."""
-    override = os.environ.get(MODELS_ENV)
-    if override:
-        return Path(override).expanduser()
-    return Path(__file__).resolve().parents[2] / "models" / "mjcf"
+    """The folder holding ``NAME.xml`` + ``NAME.toml``: ``$MOTOK_ROBOT_MODELS/mjcf`` or ``<repo>/models/mjcf``."""
+    return robots_dir()
 
 
 def list_robots() -> list[str]:
