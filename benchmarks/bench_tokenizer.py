@@ -78,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
             decode_s = _time(lambda s=steps: tok.decode(tokens, length=frames, steps=s or None, seed=0), args.repeats, device)
             rows.append({"threads": threads, "what": "decode", "steps": steps, "seconds": decode_s})
     clip_seconds = frames / cfg.fps
-    print(f"tokenizer: {args.tokenizer or 'untrained default'}; decoder {cfg.decoder}, downsample {cfg.downsample}, "
+    what = args.tokenizer or (f"untrained, {args.config}" if args.config else "untrained default config")
+    print(f"tokenizer: {what}; decoder {cfg.decoder}, downsample {cfg.downsample}, "
           f"params {parameter_count(tok) / 1e6:.2f} M (denoiser {parameter_count(tok.denoiser) / 1e6 if tok.denoiser else 0:.2f} M); "
           f"clip {clip_seconds:.1f} s = {frames} frames = {tokens.shape[1]} tokens, batch {args.batch}, device {device}")
     print(f"{'threads':>7} {'what':>7} {'steps':>5} {'ms':>9} {'x realtime':>10}")
@@ -92,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
         "frames": frames,
         "tokens": int(tokens.shape[1]),
         "batch": args.batch,
-        "tokenizer": str(args.tokenizer) if args.tokenizer else "untrained default config",
+        "tokenizer": str(what),
         "config": {"decoder": cfg.decoder, "downsample": cfg.downsample, "denoiser_width": cfg.denoiser_width,
                    "denoiser_blocks": cfg.denoiser_blocks, "width": cfg.width},
         "parameters": parameter_count(tok),

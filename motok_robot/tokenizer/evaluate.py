@@ -150,6 +150,7 @@ def machine_description() -> dict[str, Any]:
         import os
 
         info["cpus"] = len(os.sched_getaffinity(0))
+        info["load_average_1min"] = os.getloadavg()[0]  # other work on the machine skews timings
     except (AttributeError, OSError):  # pragma: no cover - not Linux
         pass
     if torch.cuda.is_available():
