@@ -138,6 +138,21 @@ class Retargeter:
     def prepare(self, frames: int) -> None:
         """Build every problem a clip of ``frames`` frames needs (so timing can exclude it)."""
         self.problem(min(self.window, frames))
+        if self._presolve_size(min(self.window, frames)) > 0:
+            self.problem(self._presolve_size(min(self.window, frames)))
+
+    def _presolve_size(self, first_window: int) -> int:
+        n = self.config.presolve_frames
+        return n if self.config.mode == "trajectory" and 2 <= n < first_window else 0
+
+    def _presolve(self, x, known, n, targets: HumanTargets, kp_targets, contacts, vel_step) -> None:
+        """Solve the first ``n`` frames alone from the nominal pose; they become the warm-start
+        library of the first window (cheaper than starting a whole window from the nominal pose)."""
+        x0 = self._warm_start(x, known, 0, n, targets, kp_targets)
+        sol = self.problem(n).solve(x0, kp_targets[:n], targets.heading[:n], targets.foot_dir[:n], contacts[:n],
+                                    None, None, vel_step, self.config.ground_height)
+        x[:n] = sol.x
+        known[:n] = True
 
     def windows(self, T: int) -> list[tuple[int, int, int]]:
         """``[(start, stop, commit_stop)]`` for a clip of ``T`` frames."""
@@ -175,6 +190,8 @@ class Retargeter:
         bar = tqdm(plan, desc=f"retarget {self.robot.name} ({cfg.mode})", unit="window", disable=None if progress is None else not progress)
         for s, e, commit in bar:
             prob = self.problem(e - s)
+            if s == 0 and known.sum() == 0 and self._presolve_size(e) > 0:
+                self._presolve(x, known, self._presolve_size(e), targets, kp_targets, contacts, vel_step)
             x0 = self._warm_start(x, known, s, e, targets, kp_targets)
             history = x[s - 2 : s] if s >= 2 else (np.stack([x[0], x[0]]) if s == 1 else None)
             prev_contact = contacts[s - 1] if s >= 1 else None
@@ -206,7 +223,7 @@ class Retargeter:
         this is usually a close guess); the nominal pose on the human root for the first window."""
         x0 = np.zeros((e - s, self.kin.nx))
         root = self._root_track(kp_targets)
-        solved = np.flatnonzero(known[:s]) if s > 0 else np.zeros(0, dtype=int)
+        solved = np.flatnonzero(known[: max(s, 1)] if s > 0 else known)
         if len(solved):
             local = _heading_local(kp_targets - root[:, None, :], targets.heading)
             lib = local[solved].reshape(len(solved), -1)
