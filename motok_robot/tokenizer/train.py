@@ -303,6 +303,9 @@ def train_tokenizer(
             row["seconds"] = round(time.perf_counter() - started, 2)
             rows.append(row)
             running, running_n = {k: 0.0 for k in _RUNNING}, 0
+            if progress is not False:  # one line per epoch, also in logs where the bar is hidden
+                shown = ("epoch", "step", "train_loss", "train_usage", "val_feature_mse", "val_mpjpe_cm", "val_usage", "restarts", "seconds")
+                tqdm.write(" ".join(f"{k}={row[k]:.4g}" if isinstance(row[k], float) else f"{k}={row[k]}" for k in shown if k in row))
         if epoch_end or step % cfg.checkpoint_every == 0 or step == stop_at:
             checkpoint()
         if stop_at is not None and step >= stop_at:
