@@ -8,7 +8,8 @@ File formats (one example each in ``examples/``):
 
 * root trajectory, CSV: a header ``frame,x,y`` or ``frame,x,y,z`` (or ``time`` in seconds
   instead of ``frame``); one row per constrained frame; sparse rows = sparse control.
-  NPZ: ``root`` ``[T, 2|3]`` and optionally ``mask`` ``[T]`` (bool) or ``frames`` ``[K]``.
+  A CSV without header (or a ``.npy`` array) ``[T, 2|3]`` has one row per frame from frame 0,
+  NaN = free. NPZ: ``root`` ``[T, 2|3]`` and optionally ``mask`` ``[T]`` (bool) or ``frames`` ``[K]``.
   ``z`` constrains the pelvis height.
 * keyframes, JSON: ``{"keyframes": [{"frame": 40, "joint": "right_wrist", "position": [x, y, z]}, ...]}``
   (``"time"`` in seconds instead of ``"frame"`` is accepted).
@@ -152,6 +153,8 @@ def add_trajectory(constraints: Constraints, path: str | Path, fps: float = FPS)
         with open(path, newline="") as handle:
             reader = csv.DictReader(handle)
             header = [h.strip() for h in (reader.fieldnames or [])]
+            if header and all(_is_number(h) for h in header):
+                return _add_dense_root(constraints, _read_headerless_csv(path), str(path))
             if "x" not in header or "y" not in header or not ({"frame", "time"} & set(header)):
                 raise InputError(f"{path}: CSV header must be 'frame,x,y[,z]' or 'time,x,y[,z]', got {header}")
             rows = list(reader)
@@ -185,7 +188,57 @@ def add_trajectory(constraints: Constraints, path: str | Path, fps: float = FPS)
         for i in np.flatnonzero(mask):
             constraints.set_joint(int(frames[i]), 0, root[i], where=f"{path}: 'root' row {i}")
         return constraints
-    raise InputError(f"trajectory file {path}: expected .csv or .npz")
+    if path.suffix.lower() == ".npy":
+        try:
+            root = np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            raise InputError(f"{path}: cannot be read as a .npy array ({exc})") from None
+        return _add_dense_root(constraints, root, str(path))
+    raise InputError(f"trajectory file {path}: expected .csv, .npz or .npy")
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _read_headerless_csv(path: Path) -> np.ndarray:
+    rows = []
+    with open(path, newline="") as handle:
+        for line, row in enumerate(csv.reader(handle), start=1):
+            if not row or not "".join(row).strip():
+                continue
+            try:
+                rows.append([float(v) for v in row])
+            except ValueError:
+                raise InputError(f"{path}: line {line}: expected numbers x,y[,z], got {row}") from None
+    widths = {len(r) for r in rows}
+    if len(widths) != 1:
+        raise InputError(f"{path}: rows have different numbers of values {sorted(widths)}")
+    return np.asarray(rows, dtype=np.float64)
+
+
+def _add_dense_root(constraints: Constraints, root, where: str) -> Constraints:
+    """One row per frame from frame 0: ``root [T, 2|3]`` x, y (, pelvis height); NaN = free."""
+    root = np.asarray(root, dtype=np.float64)
+    if root.ndim != 2 or root.shape[1] not in (2, 3):
+        raise InputError(f"{where}: trajectory must have shape [T, 2] or [T, 3] (x, y[, z] per frame), got {list(root.shape)}")
+    if np.isinf(root).any():
+        row = int(np.argwhere(np.isinf(root))[0, 0])
+        raise InputError(f"{where}: row {row} is infinite (NaN marks a free frame)")
+    if len(root) > constraints.frames:
+        raise InputError(f"{where}: {len(root)} trajectory rows but the clip has {constraints.frames} frames")
+    for f in range(len(root)):
+        xy_given = np.isfinite(root[f, :2])
+        if xy_given.all():
+            z_given = root.shape[1] == 3 and np.isfinite(root[f, 2])
+            constraints.set_joint(f, 0, root[f, :3] if z_given else root[f, :2], where=f"{where}: row {f}")
+        elif xy_given.any():
+            raise InputError(f"{where}: row {f}: x and y must both be given or both be NaN")
+    return constraints
 
 
 def _read_json(path: str | Path, what: str) -> dict:

@@ -45,6 +45,7 @@ def generate_motion(
     planner_run=None,
     device: str = "cpu",
     out=None,
+    generator=None,
     **sample_options,
 ):
     """Generate a motion that follows ``constraints``; returns a ``GeneratedMotion``.
@@ -52,13 +53,16 @@ def generate_motion(
     ``constraints`` must be built for the clip's frame count (``seconds * 20``); ``seconds``
     defaults to that count when constraints are given. Other keyword arguments are those of
     :meth:`motok_robot.planner.generate.MotionGenerator.generate` (cfg_scale, action, steps, ...).
+    ``generator`` is a loaded :class:`~motok_robot.planner.generate.MotionGenerator` to use
+    instead of loading one from ``planner`` / ``tokenizer_run`` / ``planner_run``.
     """
     from motok_robot.control.decode import decode_with_control
     from motok_robot.planner.generate import load_generator
 
     if control_path not in CONTROL_PATHS:
         raise InputError(f"control_path must be one of {CONTROL_PATHS}, got {control_path!r}")
-    generator = load_generator(planner, tokenizer_run, planner_run, device)
+    if generator is None:
+        generator = load_generator(planner, tokenizer_run, planner_run, device)
     if constraints is None or constraints.is_empty:
         motion = generator.generate(text=text, seconds=seconds, seed=seed, **sample_options)
     else:

@@ -1,6 +1,6 @@
 """Command-line options of controlled generation, shared by ``generate`` and ``run``.
 
-Light module (no torch): it only declares arguments and turns them into a
+Light module (numpy, no torch): it only declares arguments and turns them into a
 :class:`~motok_robot.control.constraints.Constraints` for a clip of known length.
 """
 
@@ -8,12 +8,16 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
+
 from motok_robot.control.config import MECHANISMS, ControlConfig
 
 
 def add_control_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("kinematic control (file formats: README, examples/)")
-    group.add_argument("--trajectory", metavar="FILE", help="root trajectory on the ground, .csv (frame,x,y[,z]) or .npz")
+    group.add_argument("--trajectory", metavar="FILE",
+                       help="root trajectory on the ground: .csv (frame,x,y[,z] rows; or x,y[,z] per frame without "
+                       "header), .npz (root [T, 2|3]) or .npy [T, 2|3] (NaN = free); sets the length without --seconds")
     group.add_argument("--keyframes", metavar="FILE", help="joint-position keyframes, .json")
     group.add_argument("--obstacles", metavar="FILE", help="ground obstacles (circles, boxes), .json")
     group.add_argument("--prefix", metavar="MOTION", help="motion.npz whose frames start the clip (in-betweening)")
@@ -62,3 +66,35 @@ def control_config_from_args(args: argparse.Namespace) -> ControlConfig:
     if args.guidance_scale is not None:
         cfg.gmd_scale = args.guidance_scale
     return cfg
+
+
+#: clip length when constraints are given without --seconds and no file fixes it
+DEFAULT_CONSTRAINED_SECONDS = 6.0
+#: the longest clip a constraint file may describe when probing its length (10 minutes at 20 fps)
+_PROBE_FRAMES = 12000
+
+
+def frames_from_args(args: argparse.Namespace, fps: int = 20, default_seconds: float = DEFAULT_CONSTRAINED_SECONDS) -> int:
+    """Clip length (frames) for the constraints on the command line.
+
+    ``--seconds`` when given; else the motion to ``--edit``; else the last frame of the
+    ``--trajectory``; else ``default_seconds``, long enough for the keyframes and for
+    ``--prefix`` + ``--suffix`` with one free second between them.
+    """
+    from motok_robot.control import constraints as C
+
+    if getattr(args, "seconds", None) is not None:
+        return max(1, round(args.seconds * fps))
+    if args.edit:
+        return len(C._read_motion(args.edit, "edit")[0])
+    if args.trajectory:
+        probe = C.add_trajectory(C.Constraints(_PROBE_FRAMES), args.trajectory, fps=fps)
+        return int(np.flatnonzero(probe.joint_mask[:, 0]).max()) + 1
+    frames = round(default_seconds * fps)
+    if args.keyframes:
+        probe = C.add_keyframes(C.Constraints(_PROBE_FRAMES), args.keyframes, fps=fps)
+        frames = max(frames, int(np.flatnonzero(probe.joint_mask.any(axis=1)).max()) + 1)
+    given = sum(len(C._read_motion(path, what)[0]) for path, what in ((args.prefix, "prefix"), (args.suffix, "suffix")) if path)
+    if given:
+        frames = max(frames, given + fps)
+    return frames

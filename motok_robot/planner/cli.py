@@ -58,10 +58,10 @@ def register(commands, groups) -> None:
     gen.add_argument("--temperature", type=float, default=None, help="token sampling temperature (default 1; 0 = greedy)")
     gen.add_argument("--top-k", type=int, default=None)
     gen.add_argument("--top-p", type=float, default=None)
-    gen.add_argument("--trajectory", type=Path, default=None,
-                     help="root path to follow coarsely: .npy or .csv [T, 2|3] (x, y[, height]) metres at 20 fps")
     gen.add_argument("--device", default="cpu")
-    gen.set_defaults(func=_generate)
+    # the control stage (motok_robot/control/cli.py, registered after this module) adds the
+    # constraint options (--trajectory, --keyframes, ...) to this parser and wraps the handler
+    gen.set_defaults(func=generate_command)
 
 
 def _train(args: argparse.Namespace) -> int:
@@ -103,25 +103,14 @@ def read_prompts(path: Path) -> list[str]:
     return prompts
 
 
-def _read_trajectory(path: Path):
-    import numpy as np
-
-    if not path.is_file():
-        raise InputError(f"--trajectory {path}: file not found")
-    try:
-        arr = np.load(path, allow_pickle=False) if path.suffix == ".npy" else np.loadtxt(path, delimiter=",", ndmin=2)
-    except (ValueError, OSError) as exc:
-        raise InputError(f"--trajectory {path}: cannot read ({exc})") from None
-    if arr.ndim != 2 or arr.shape[1] not in (2, 3):
-        raise InputError(f"--trajectory {path}: expected [T, 2] or [T, 3] (x, y[, height]) metres, got {arr.shape}")
-    return arr
-
-
 def _slug(text: str) -> str:
     return re.sub(r"[^a-z0-9]+", "_", text.lower()).strip("_")[:48] or "motion"
 
 
-def _generate(args: argparse.Namespace) -> int:
+def generate_command(args: argparse.Namespace, generate_one=None) -> int:
+    """``motok-robot generate``. ``generate_one(generator, text=, action=, unconditional=, seconds=,
+    seed=, ...)`` makes one motion (default ``generator.generate``); the control stage passes
+    its constrained generation here."""
     from tqdm import tqdm
 
     from motok_robot.planner.generate import check_text, load_generator
@@ -145,18 +134,18 @@ def _generate(args: argparse.Namespace) -> int:
         out = args.out if args.out.suffix == ".npz" else args.out / "motion.npz"
         if out.is_dir() or (out.parent.exists() and not out.parent.is_dir()):
             raise InputError(f"--out {args.out}: cannot write {out} (a directory or a file is in the way)")
-    trajectory = _read_trajectory(args.trajectory) if args.trajectory is not None else None
     gen = load_generator(args.planner, args.tokenizer, args.planner_run, args.device)
+    one = generate_one or (lambda generator, **kwargs: generator.generate(**kwargs))
     options = dict(seconds=args.seconds, seed=args.seed, cfg_scale=args.cfg, steps=args.steps,
                    decoder_steps=args.decoder_steps, temperature=args.temperature, top_k=args.top_k,
-                   top_p=args.top_p, trajectory=trajectory)
+                   top_p=args.top_p)
     if prompts is not None:
         for i, prompt in enumerate(tqdm(prompts, desc="generating", unit="prompt", disable=None)):
-            motion = gen.generate(text=prompt, **options)
+            motion = one(gen, text=prompt, **options)
             motion.save(args.out / f"{i:03d}_{_slug(prompt)}.npz")
         print(f"{len(prompts)} motions written to {args.out}")
         return 0
-    motion = gen.generate(text=args.text, action=args.action, unconditional=args.unconditional, **options)
+    motion = one(gen, text=args.text, action=args.action, unconditional=args.unconditional, **options)
     motion.save(out)
     t = motion.timings
     print(f"{out}: {motion.joints.shape[0]} frames ({motion.seconds:.2f} s), {len(motion.tokens)} tokens; "
