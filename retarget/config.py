@@ -88,5 +88,5 @@ class RetargetConfig:
     contacts: ContactConfig = field(default_factory=ContactConfig)
     solver: SolverConfig = field(default_factory=SolverConfig)
     ground_height: float = 0.0  # metres, world z of the floor
-    presolve_frames: int = 15  # the first window is warm-started from these frames solved alone (0 = off)
+    presolve_frames: int = 15  # the first window is warm-started by a sweep of windows this long (0 = off)
     velocity_margin: float = 0.98  # use this fraction of each joint's velocity limit

@@ -145,14 +145,18 @@ class Retargeter:
         n = self.config.presolve_frames
         return n if self.config.mode == "trajectory" and 2 <= n < first_window else 0
 
-    def _presolve(self, x, known, n, targets: HumanTargets, kp_targets, contacts, vel_step) -> None:
-        """Solve the first ``n`` frames alone from the nominal pose; they become the warm-start
-        library of the first window (cheaper than starting a whole window from the nominal pose)."""
-        x0 = self._warm_start(x, known, 0, n, targets, kp_targets)
-        sol = self.problem(n).solve(x0, kp_targets[:n], targets.heading[:n], targets.foot_dir[:n], contacts[:n],
-                                    None, None, vel_step, self.config.ground_height)
-        x[:n] = sol.x
-        known[:n] = True
+    def _presolve(self, x, known, n, first_window: int, targets: HumanTargets, kp_targets, contacts, vel_step) -> None:
+        """Sweep the first window in chunks of ``n`` frames (each chunk chained to the previous one
+        and warm-started from it by nearest pose): a cheap, rough first pass that warm-starts the
+        first full window much better than the nominal pose does."""
+        prob = self.problem(n)
+        for s in range(0, first_window - n + 1, n):
+            x0 = self._warm_start(x, known, s, s + n, targets, kp_targets)
+            history = x[s - 2 : s] if s >= 2 else None
+            sol = prob.solve(x0, kp_targets[s : s + n], targets.heading[s : s + n], targets.foot_dir[s : s + n],
+                             contacts[s : s + n], history, contacts[s - 1] if s else None, vel_step, self.config.ground_height)
+            x[s : s + n] = sol.x
+            known[s : s + n] = True
 
     def windows(self, T: int) -> list[tuple[int, int, int]]:
         """``[(start, stop, commit_stop)]`` for a clip of ``T`` frames."""
@@ -191,7 +195,7 @@ class Retargeter:
         for s, e, commit in bar:
             prob = self.problem(e - s)
             if s == 0 and known.sum() == 0 and self._presolve_size(e) > 0:
-                self._presolve(x, known, self._presolve_size(e), targets, kp_targets, contacts, vel_step)
+                self._presolve(x, known, self._presolve_size(e), e, targets, kp_targets, contacts, vel_step)
             x0 = self._warm_start(x, known, s, e, targets, kp_targets)
             history = x[s - 2 : s] if s >= 2 else (np.stack([x[0], x[0]]) if s == 1 else None)
             prev_contact = contacts[s - 1] if s >= 1 else None
@@ -223,7 +227,7 @@ class Retargeter:
         this is usually a close guess); the nominal pose on the human root for the first window."""
         x0 = np.zeros((e - s, self.kin.nx))
         root = self._root_track(kp_targets)
-        solved = np.flatnonzero(known[: max(s, 1)] if s > 0 else known)
+        solved = np.flatnonzero(known[:s]) if s > 0 else np.flatnonzero(known)
         if len(solved):
             local = _heading_local(kp_targets - root[:, None, :], targets.heading)
             lib = local[solved].reshape(len(solved), -1)
