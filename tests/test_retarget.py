@@ -432,6 +432,28 @@ def test_cli_retarget_op3_like(tmp_path):
     assert main(["retarget", str(motion), "--robot", "no_such_robot", "--out", str(tmp_path / "x.npz")]) == 2
 
 
+def test_cli_fails_on_non_converged_window_unless_allowed(tmp_path, monkeypatch, capsys):
+    robots = pytest.importorskip("motok_robot.robots")
+    try:
+        robots.load("op3_like")
+    except Exception as exc:
+        pytest.skip(f"op3_like cannot be loaded: {exc}")
+    import retarget.config as config_module
+    from motok_robot.cli import main
+
+    starved = replace(RetargetConfig(), solver=SolverConfig(max_iter=1))
+    monkeypatch.setattr(config_module, "RetargetConfig", lambda: starved)
+    motion = tmp_path / "motion.npz"
+    np.savez(motion, joints=synthetic_walk(T=20).astype(np.float32), fps=20)
+    out = tmp_path / "robot.npz"
+    args = ["retarget", str(motion), "--robot", "op3_like", "--out", str(out), "--window", "20", "--overlap", "5"]
+    assert main(args) == 2 and not out.exists()
+    err = capsys.readouterr().err
+    assert "did not converge" in err and "Maximum_Iterations_Exceeded" in err and "violated: frame" in err
+    assert main(args + ["--allow-partial"]) == 0 and out.exists()
+    assert read_robot_npz(out).solver_status[0]["success"] is False
+
+
 def test_soft_com_term_pulls_com_over_support(robot, small):
     human = synthetic_walk(T=40)
     with_com = Retargeter(robot, replace(SMALL, weights=replace(SMALL.weights, com=1000.0)))
