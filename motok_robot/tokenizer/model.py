@@ -28,6 +28,9 @@ from motok_robot.tokenizer.networks import ConditionDecoder, Denoiser, Encoder
 from motok_robot.tokenizer.quantizer import VectorQuantizer
 from motok_robot.tokenizer.sampler import EPS_X0_CLAMP, cosine_alpha_bar, ddim_sample
 
+#: gamma of the Min-SNR loss weighting of the eps parameterisation
+MIN_SNR_GAMMA = 5.0
+
 #: minimum std used for normalising (dims that are constant in the training data)
 STD_FLOOR = 1e-4
 
@@ -83,7 +86,10 @@ class MoTok(nn.Module):
         self.quantizer = VectorQuantizer(config.codebook_size, config.code_dim, config.ema_decay, config.dead_code_threshold)
         if config.decoder == "diffusion":
             self.cond_decoder = ConditionDecoder(config.code_dim, config.width, config.width, config.downsample, config.depth, config.kernel_size)
-            self.denoiser: Denoiser | None = Denoiser(dim, config.width, config.denoiser_width, config.denoiser_blocks, config.denoiser_kernel)
+            self.denoiser: Denoiser | None = Denoiser(
+                dim, config.width, config.denoiser_width, config.denoiser_blocks, config.denoiser_kernel,
+                input_skip=config.parameterisation == "eps",
+            )
         else:
             self.cond_decoder = ConditionDecoder(config.code_dim, config.width, dim, config.downsample, config.depth, config.kernel_size)
             self.denoiser = None
@@ -281,7 +287,12 @@ class MoTok(nn.Module):
                 reconstruction = _masked_mse(pred, x0, mask)
                 x0_hat_model = pred
             else:
-                reconstruction = _masked_mse(pred, noise, mask)
+                # Min-SNR weighting (weight min(SNR, 5) / SNR): at low noise the eps target is
+                # dominated by noise the network cannot see; down-weight it so it does not swamp
+                # the steps that decide the motion
+                snr = ab / (1 - ab).clamp_min(1e-12)
+                weight = (snr.clamp(max=MIN_SNR_GAMMA) / snr)
+                reconstruction = _masked_mse(pred * weight.sqrt(), noise * weight.sqrt(), mask)
                 x0_hat_model = ((x_t - (1 - ab).sqrt() * pred) / ab.sqrt().clamp_min(1e-6)).clamp(-EPS_X0_CLAMP, EPS_X0_CLAMP)
         out["reconstruction"] = reconstruction
         out["commitment"] = vq.commitment

@@ -127,12 +127,14 @@ class Denoiser(nn.Module):
     """``f_phi(x_t, t, s)``: noisy motion ``x_t [B, T, F]``, timesteps ``t [B]`` (0..diffusion_steps-1)
     and the per-frame condition ``s [B, T, cond_dim]`` -> prediction ``[B, T, F]`` (x0 or eps).
 
-    A dilated residual 1-D convolution network (dilations 1, 2, 4, 8 repeating).  The
+    A dilated residual 1-D convolution network (dilations 1, 2, 4, 8 repeating).  With
+    ``input_skip`` (used for the eps parameterisation) ``x_t`` is added to the output, scaled
+    per feature dim by a learned function of ``t`` (initially 1: at high noise eps ~ x_t).  The
     condition is projected once by :meth:`condition` and added inside every block, so a
     sampler projects it once per decode, not once per step.
     """
 
-    def __init__(self, feature_dim: int, cond_dim: int, width: int, blocks: int, kernel: int):
+    def __init__(self, feature_dim: int, cond_dim: int, width: int, blocks: int, kernel: int, input_skip: bool = False):
         super().__init__()
         self.width = width
         self.input = _conv(feature_dim + cond_dim, width, kernel)
@@ -143,6 +145,12 @@ class Denoiser(nn.Module):
         self.output = _conv(width, feature_dim, kernel)
         nn.init.zeros_(self.output.weight)
         nn.init.zeros_(self.output.bias)
+        # eps prediction: the noise is white in all feature dims, more than a width-channel network
+        # can carry, so x_t reaches the output directly, scaled per dim by a learned function of t
+        self.skip_scale = nn.Linear(width, feature_dim) if input_skip else None
+        if self.skip_scale is not None:
+            nn.init.zeros_(self.skip_scale.weight)
+            nn.init.ones_(self.skip_scale.bias)
 
     def condition(self, s: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Pre-compute what depends only on ``s [B, T, cond_dim]``: (s channels-first, its projection)."""
@@ -157,4 +165,7 @@ class Denoiser(nn.Module):
         h = self.input(torch.cat([x_t.transpose(1, 2), s_cf], dim=1))
         for block in self.blocks:
             h = block(h, temb, cond)
-        return self.output(F.silu(self.out_norm(h))).transpose(1, 2)
+        out = self.output(F.silu(self.out_norm(h))).transpose(1, 2)
+        if self.skip_scale is not None:
+            out = out + self.skip_scale(temb)[:, None, :] * x_t
+        return out
