@@ -105,7 +105,7 @@ def run(inv: Invocation, timeout: float) -> Outcome:
         return Outcome(inv, f"skipped: {inv.skip_reason}")
     cmd = [sys.executable, str(inv.script), *inv.args]
     print(f"== {inv.name}: {' '.join(cmd[1:])}", flush=True)
-    start = time.perf_counter()
+    start, started_at = time.perf_counter(), time.time() - 1.0
     try:
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=REPO_ROOT)
     except subprocess.TimeoutExpired as exc:
@@ -116,14 +116,16 @@ def run(inv: Invocation, timeout: float) -> Outcome:
     print(done.stdout[-4000:], end="" if done.stdout.endswith("\n") else "\n")
     if done.returncode != 0:
         print(done.stderr[-2000:], file=sys.stderr)
-    return Outcome(inv, status, seconds, done.stdout, done.stderr, json_path_of(inv))
+    return Outcome(inv, status, seconds, done.stdout, done.stderr, json_path_of(inv, newer_than=started_at))
 
 
-def json_path_of(inv: Invocation) -> Path | None:
+def json_path_of(inv: Invocation, newer_than: float | None = None) -> Path | None:
+    """The JSON the run wrote (a file left from an earlier run does not count)."""
     for flag in ("--out", "--json"):
         if flag in inv.args:
             path = Path(inv.args[inv.args.index(flag) + 1])
-            return path if path.is_file() else None
+            fresh = path.is_file() and (newer_than is None or path.stat().st_mtime >= newer_than)
+            return path if fresh else None
     return None
 
 
@@ -165,7 +167,7 @@ def write_report(outcomes: list[Outcome], path: Path, results: Path, command: st
             lines += ["", "```text", "\n".join(o.stderr.strip().splitlines()[-15:]), "```"]
         payload = None
         jp = o.json_path or (results / f"{o.invocation.name}.json")
-        if jp.is_file():
+        if jp.is_file() and (o.json_path is not None or o.status == "from existing JSON"):
             try:
                 payload = json.loads(jp.read_text())
             except json.JSONDecodeError:

@@ -101,3 +101,20 @@ def test_bench_all_plans_runs_and_reports(tmp_path, monkeypatch):
     assert "Measured on:" in text and "| fast | ok |" in text and "| broken | failed (exit 3) |" in text
     assert "| what | ms |\n|---|---:|\n| x | 1.50 |" in text and "Machine: toy" in text
     assert "about to fail" in text
+
+
+def test_bench_all_ignores_stale_json_of_a_failed_run(tmp_path, monkeypatch):
+    scripts = tmp_path / "benchmarks"
+    scripts.mkdir()
+    (scripts / "flaky.py").write_text(
+        "import argparse, sys\np = argparse.ArgumentParser(); p.add_argument('--out'); p.parse_args()\nsys.exit(1)\n")
+    monkeypatch.setattr(bench_all, "REPO_ROOT", tmp_path)
+    results = tmp_path / "results"
+    results.mkdir()
+    (results / "flaky.json").write_text(json.dumps({"rows": [{"stale": 1.0}]}))
+    (inv,) = bench_all.plan([scripts / "flaky.py"], results, data=None)
+    time.sleep(1.1)
+    outcome = bench_all.run(inv, timeout=60)
+    assert outcome.status == "failed (exit 1)" and outcome.json_path is None
+    bench_all.write_report([outcome], tmp_path / "R.md", results, "x")
+    assert "stale" not in (tmp_path / "R.md").read_text()
