@@ -102,3 +102,22 @@ def test_corruptions_and_extra_negatives():
     plain = model.contrastive_loss(t, m, same)
     harder = model.contrastive_loss(t, m, same, torch.nn.functional.normalize(torch.randn(3, 16), dim=-1))
     assert harder > plain
+
+
+def test_runs_written_before_the_delta_channels_still_load(tmp_path):
+    import json
+
+    from motok_robot.eval.evaluator import load_evaluator, save_evaluator
+
+    torch.manual_seed(0)
+    cfg = EvaluatorConfig(width=32, latent_dim=16, layers=1, heads=2, max_frames=80, motion_deltas=False,
+                          corrupt_negatives=0.0)
+    old = TextMotionEvaluator(cfg, 8, np.zeros(263, np.float32), np.ones(263, np.float32))
+    save_evaluator(old, tmp_path)
+    config = json.loads((tmp_path / "config.json").read_text())
+    for key in ("motion_deltas", "corrupt_negatives"):
+        del config["evaluator"][key]
+    (tmp_path / "config.json").write_text(json.dumps(config))
+    loaded = load_evaluator(tmp_path)
+    assert loaded.cfg.motion_deltas is False and loaded.motion.stem[0].in_channels == 263
+    assert tiny_evaluator().motion.stem[0].in_channels == 2 * 263  # the default feeds frame differences too

@@ -28,6 +28,8 @@ class EvaluatorConfig:
     #: share of each batch whose motion gets a corrupted copy (frames shuffled, time reversed,
     #: frozen or jittered) used as an extra negative for every caption (0 = plain InfoNCE)
     corrupt_negatives: float = 0.25
+    #: feed frame-to-frame feature differences to the motion encoder as extra channels
+    motion_deltas: bool = True
     min_frames: int = 40  # 2 s at 20 fps
     max_frames: int = 196  # 9.8 s, as HumanML3D
     batch_size: int = 64

@@ -28,13 +28,19 @@ from motok_robot.eval.config import EvaluatorConfig
 
 
 class MotionEncoder(nn.Module):
-    """Normalised features ``[B, T, 263]`` + lengths ``[B]`` -> unit embeddings ``[B, latent]``."""
+    """Normalised features ``[B, T, 263]`` + lengths ``[B]`` -> unit embeddings ``[B, latent]``.
+
+    With ``cfg.motion_deltas`` the frame-to-frame differences of the normalised features are
+    extra input channels, so per-frame jitter reaches the network as magnitude, not only as
+    zero-mean noise that the convolutions and the pooling average away.
+    """
 
     def __init__(self, cfg: EvaluatorConfig):
         super().__init__()
         w = cfg.width
+        self.deltas = cfg.motion_deltas
         self.stem = nn.Sequential(
-            nn.Conv1d(cfg.feature_dim, w, 4, stride=2, padding=1),
+            nn.Conv1d(cfg.feature_dim * (2 if cfg.motion_deltas else 1), w, 4, stride=2, padding=1),
             nn.GELU(),
             nn.Conv1d(w, w, 4, stride=2, padding=1),
             nn.GELU(),
@@ -56,7 +62,11 @@ class MotionEncoder(nn.Module):
         extra = -features.shape[1] % 4
         if extra:
             features = F.pad(features, (0, 0, 0, extra))
-        h = features.transpose(1, 2) * self._valid(features.shape[1], lengths)  # [B, F, T]
+        valid = self._valid(features.shape[1], lengths)
+        h = features.transpose(1, 2) * valid  # [B, F, T]
+        if self.deltas:  # frame-to-frame changes as extra channels (0 at the first and past the last frame)
+            delta = torch.diff(h, dim=2, prepend=h[:, :, :1]) * valid
+            h = torch.cat([h, delta], dim=1)  # [B, 2F, T]
         h = self.stem[1](self.stem[0](h))  # [B, w, T/2]
         h = h * self._valid(h.shape[2], (lengths + 1) // 2)
         h = self.stem[3](self.stem[2](h)).transpose(1, 2)  # [B, T/4, w]
@@ -141,7 +151,8 @@ def load_evaluator(run_dir: str | Path, device: str = "cpu") -> TextMotionEvalua
         if not (run / name).exists():
             raise InputError(f"evaluator run {run}: missing {name} (train one with `motok-robot train evaluator`)")
     config = json.loads((run / "config.json").read_text())
-    cfg = EvaluatorConfig.from_dict(config["evaluator"])
+    # runs written before these options existed used neither
+    cfg = EvaluatorConfig.from_dict({"motion_deltas": False, "corrupt_negatives": 0.0, **config["evaluator"]})
     state = load_file(str(run / "model.safetensors"))
     model = TextMotionEvaluator(cfg, int(config["text_dim"]), state["mean"].numpy(), state["std"].numpy())
     missing, unexpected = model.load_state_dict(state, strict=False)
