@@ -56,6 +56,8 @@ import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from motok_robot.errors import HardwareError, InputError, MotokError
 
 #: Longest prompt accepted, characters (equals ``motok_robot.text.MAX_TEXT_CHARS``; kept here so
@@ -67,6 +69,58 @@ DEFAULT_CONSTRAINED_SECONDS = 6.0
 #: Stages timed in :attr:`PipelineResult.timings`, in order.
 STAGES = ("generate", "retarget", "validate", "plots", "render", "playback")
 PLOT_FILES = ("balance_topview.png", "feet.png", "joints.png", "torques.png")
+
+
+# ----------------------------------------------------------------------------- motion from a file
+@dataclass
+class SourceMotion:
+    """A motion read from a file instead of generated (``run --motion``): a ``motion.npz``, or a
+    mocap file (BVH / ASF+AMC / DeepMimic JSON) put on the canonical skeleton with its features."""
+
+    joints: np.ndarray  #: float32 [T, 22, 3] metres, z up
+    features: np.ndarray  #: float32 [T, 263]
+    text: str
+    model: str
+    fps: int = 20
+    seed: int = 0
+
+    @property
+    def seconds(self) -> float:
+        return self.joints.shape[0] / self.fps
+
+    def save(self, path) -> Path:
+        from motok_robot.planner.motion_file import save_motion
+
+        return save_motion(path, self.joints, self.features, np.zeros(0, np.int64), self.text, self.seed,
+                           self.model, self.fps)
+
+
+def load_source_motion(path, skeleton: str = "bandai", asf=None) -> SourceMotion:
+    """Read ``--motion``: ``motion.npz`` as it is; a mocap file through the data importers
+    (20 fps) and :func:`~motok_robot.motion.features.normalise_joints` (canonical bones, floor at
+    z = 0, facing +x), with joints recovered from its features so the two agree frame by frame."""
+    from motok_robot.motion.features import features_from_joints, joints_from_features
+    from retarget.io import read_input
+
+    p = Path(path)
+    if p.suffix.lower() == ".npz":
+        try:
+            with np.load(p, allow_pickle=False) as data:
+                if {"joints", "features"} <= set(data.files):
+                    text = str(data["text"]) if "text" in data.files else ""
+                    model = str(data["model"]) if "model" in data.files else ""
+                    return SourceMotion(np.asarray(data["joints"], np.float32), np.asarray(data["features"], np.float32),
+                                        text or f"motion:{p.name}", model or f"file:{p.name}")
+        except (OSError, ValueError) as exc:
+            raise InputError(f"{p}: cannot read as .npz ({exc})") from None
+    human = read_input(p, skeleton=skeleton, asf=asf)
+    if abs(human.fps - 20.0) > 1e-6:
+        from motok_robot.motion.features import resample
+
+        human.joints = resample(human.joints, human.fps, 20.0)
+    features = features_from_joints(human.joints)
+    joints = joints_from_features(features).astype(np.float32)
+    return SourceMotion(joints, features.astype(np.float32), f"motion:{p.name}", f"file:{p.name}")
 
 
 # ----------------------------------------------------------------------------- configuration
@@ -432,12 +486,17 @@ class Pipeline:
 
     # ------------------------------------------------------------------ one run
     def check(self, text, robot="op3_like", seconds=None, seed=0, constraints=None, out_dir=None,
-              playback="dry-run", port=None, overwrite=False) -> dict:
+              playback="dry-run", port=None, overwrite=False, motion=None) -> dict:
         """Check a request without doing any work (no models loaded, nothing written).
 
         Returns the cleaned arguments; raises :class:`InputError` with a one-line message.
         """
-        clean_text = check_text(text)
+        if motion is not None:
+            if constraints is not None:
+                raise InputError("constraints apply to generation; they cannot be combined with a --motion file")
+            if not Path(motion).is_file():
+                raise InputError(f"motion file {motion} does not exist")
+        clean_text = check_text(text) if (text is not None or motion is None) else None
         seconds = check_seconds(seconds)
         seed = check_seed(seed)
         robot = check_robot(robot)
@@ -452,13 +511,14 @@ class Pipeline:
                 raise InputError(f"constraints are laid on {frames} frames, but seconds={seconds:g} gives "
                                  f"{round(seconds * 20)} frames at 20 fps")
         out = check_out_dir(out_dir, overwrite)
-        return dict(text=clean_text, robot=robot, seconds=seconds, seed=seed, out_dir=out)
+        return dict(text=clean_text, robot=robot, seconds=seconds, seed=seed, out_dir=out, motion=motion)
 
     def run(self, text: str, robot: str = "op3_like", seconds: float | None = None, seed: int = 0,
             constraints=None, out_dir: str | Path = "motok_out", playback: str = "dry-run",
             port: str | None = None, force: bool = False, render: bool = True, *, control=None,
             control_path: str = "both", overwrite: bool = False, plots: bool | None = None,
-            progress: bool | None = False) -> PipelineResult:
+            progress: bool | None = False, motion: str | Path | None = None,
+            skeleton: str = "bandai") -> PipelineResult:
         """Generate, retarget, validate and play one sentence; write every file to ``out_dir``.
 
         Args:
@@ -478,17 +538,22 @@ class Pipeline:
             overwrite: replace a non-empty ``out_dir`` (only once the new run has finished).
             plots: write the validation plots (None: ``config.plots``).
             progress: show a stage progress bar (None: when stderr is a terminal).
+            motion: start from this file instead of generating (``motion.npz``, ``.bvh``, ``.amc``
+                with its ``.asf`` next to it, DeepMimic ``.json``); ``text`` may then be None.
+            skeleton: BVH skeleton map for ``motion`` (``bandai``, ``acrnn`` or a map JSON).
         Returns:
             :class:`PipelineResult`.  Raises :class:`InputError` for invalid input (nothing written)
             and :class:`MotokError` naming the stage when a stage fails (see the module docstring).
         """
-        req = self.check(text, robot, seconds, seed, constraints, out_dir, playback, port, overwrite)
+        req = self.check(text, robot, seconds, seed, constraints, out_dir, playback, port, overwrite, motion)
+        req["skeleton"] = skeleton
         timings: dict[str, float] = {}
         start_all = time.perf_counter()
-        if self._generator is None:
-            timings["load"] = self.load_models()
-        if req["seconds"] is not None:
-            self.generator.frames_for(req["seconds"])  # InputError above the planner's maximum
+        if motion is None:
+            if self._generator is None:
+                timings["load"] = self.load_models()
+            if req["seconds"] is not None:
+                self.generator.frames_for(req["seconds"])  # InputError above the planner's maximum
         t = time.perf_counter()
         entry = self.robot(req["robot"])
         if time.perf_counter() - t > 1e-3:
@@ -611,13 +676,21 @@ class Pipeline:
         bar.update()
 
         return PipelineResult(
-            out_dir=tmp, text=req["text"], robot=entry["robot"].name, seconds=float(motion.seconds),
+            out_dir=tmp, text=req["text"] or motion.text, robot=entry["robot"].name, seconds=float(motion.seconds),
             seed=req["seed"], files=files, passed=bool(report["passed"]),
             failed_checks=list(report["failed_checks"]), timings=timings, playback=pb, report=report,
             model=motion.model, notes=notes)
 
     def _generate(self, req, constraints, control, control_path):
-        """Generation, unconstrained (the planner) or constrained (the control stage)."""
+        """Generation, unconstrained (the planner) or constrained (the control stage), or a motion file."""
+        if req.get("motion") is not None:
+            source = load_source_motion(req["motion"], req.get("skeleton", "bandai"))
+            if req["seconds"] is not None:  # keep the first `seconds` of the file
+                frames = max(2, round(req["seconds"] * source.fps))
+                source.joints, source.features = source.joints[:frames], source.features[:frames]
+            if req["text"] is not None:
+                source.text = req["text"]
+            return source
         opts = dict(self.config.generation)
         if constraints is None:
             return self.generator.generate(text=req["text"], seconds=req["seconds"], seed=req["seed"], **opts)

@@ -44,6 +44,11 @@ def register(commands, groups) -> None:
                         help="with --sim: also record the simulated playback to playback_sim.mp4 (slow)")
     parser.add_argument("--realtime", action="store_true",
                         help="run the dry-run / --sim playback at the wall-clock rate (default: simulated time)")
+    parser.add_argument("--motion", type=Path, default=None, metavar="FILE",
+                        help="start from a motion instead of TEXT: motion.npz, .bvh, .amc (its .asf next to it) or "
+                             "DeepMimic .json; skips generation (no trained models needed)")
+    parser.add_argument("--skeleton", default="bandai",
+                        help="BVH skeleton of --motion: bandai, acrnn or a joint-map JSON (default bandai)")
     parser.add_argument("--prompts", type=Path, default=None, metavar="FILE",
                         help="run every prompt of FILE (one per line, or CSV text,seconds,seed); writes OUT/summary.csv")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (new or empty)")
@@ -93,10 +98,13 @@ def run_command(args: argparse.Namespace) -> int:
         check_playback(playback, None)
         check_out_dir(args.out, args.overwrite)
     else:
-        if args.text is None:
-            raise InputError('give a TEXT prompt (e.g. motok-robot run "a person walks forward" --out walk/) '
-                             "or --prompts FILE")
-        check_text(args.text)
+        if args.text is None and args.motion is None:
+            raise InputError('give a TEXT prompt (e.g. motok-robot run "a person walks forward" --out walk/), '
+                             "--motion FILE or --prompts FILE")
+        if args.motion is not None and control:
+            raise InputError("constraint options apply to generation; they cannot be combined with --motion")
+        if args.text is not None:
+            check_text(args.text)
         check_seconds(args.seconds, "--seconds")
         check_seed(args.seed, "--seed")
         check_robot(robot)
@@ -120,7 +128,8 @@ def run_command(args: argparse.Namespace) -> int:
     result = pipe.run(args.text, robot=robot, seconds=seconds, seed=args.seed, constraints=constraints,
                       out_dir=args.out, playback=playback, port=args.port, force=args.force,
                       render=not args.no_render, control=control_config,
-                      control_path=getattr(args, "control_path", "both"), overwrite=args.overwrite, progress=None)
+                      control_path=getattr(args, "control_path", "both"), overwrite=args.overwrite, progress=None,
+                      motion=args.motion, skeleton=args.skeleton)
     print(format_result(result))
     return 0 if result.ok else 1
 
