@@ -23,7 +23,7 @@ TINY_PLANNER = {
     "train": {"batch_size": 4, "val_batches": 1, "warmup_steps": 1},
 }
 #: fast decoding for the tests: few DDIM steps, few refinement iterations
-FAST = ["--decoder-steps", "4"]
+FAST = ["--decoder-steps", "4", "--refine-final-iters", "60"]
 
 
 def _write_dataset(root: Path) -> None:
@@ -232,25 +232,27 @@ def test_eval_control_protocol_on_tiny_models(runs, tmp_path, capsys):
     result = json.loads(out.read_text())
     tasks = result["tasks"]
     assert set(tasks) == {"trajectory", "keyframes", "obstacles"}
-    assert list(tasks["trajectory"]) == ["none", "planner only", "decoder only", "both motok", "both gmd", "both inpaint"]
-    assert list(tasks["obstacles"]) == ["ground truth", "none", "both motok, no obstacle term", "both motok"]
+    assert list(tasks["trajectory"]) == ["none", "planner only", "decoder only", "both gmd+motok", "both motok", "both gmd",
+                                         "both inpaint", "both gmd+motok + physics"]
+    assert list(tasks["obstacles"]) == ["ground truth", "none", "both gmd+motok, no obstacle term", "both gmd+motok",
+                                        "both gmd+motok + physics"]
     assert result["clips"]["trajectory"] == ["walk_t1", "walk_t2"]
-    for row in ("decoder only", "both motok", "both gmd", "both inpaint"):
+    for row in ("decoder only", "both gmd+motok", "both motok", "both gmd", "both inpaint"):
         assert tasks["trajectory"][row]["avg_error_m"] < 0.5 * tasks["trajectory"]["none"]["avg_error_m"], row
-    assert tasks["keyframes"]["both motok"]["avg_error_m"] < tasks["keyframes"]["none"]["avg_error_m"]
+    assert tasks["keyframes"]["both gmd+motok"]["avg_error_m"] < tasks["keyframes"]["none"]["avg_error_m"]
     assert tasks["obstacles"]["ground truth"]["avg_error_m"] == 0.0
     for key in ("traj_fail_50cm", "traj_fail_20cm", "location_fail_50cm", "avg_error_cm", "foot_skating_ratio",
-                "penetration_mm", "floating_mm", "obstacle_hit_fraction"):
+                "penetration_mm", "floating_mm", "obstacle_hit_fraction", "bone_change_cm"):
         assert key in tasks["trajectory"]["none"]
     assert "both gmd" in printed and "avg err cm" in printed
     # the same seeds give the same numbers
     again = tmp_path / "again.json"
-    assert main(["eval", "control", "--data", str(runs / "data"), "--clips", "1", "--tasks", "trajectory",
-                 "--json", str(again)] + FAST + _models(runs)) == 0
-    first = json.loads(again.read_text())["tasks"]["trajectory"]
-    assert main(["eval", "control", "--data", str(runs / "data"), "--clips", "1", "--tasks", "trajectory",
-                 "--json", str(again)] + FAST + _models(runs)) == 0
-    second = json.loads(again.read_text())["tasks"]["trajectory"]
+    quick = ["eval", "control", "--data", str(runs / "data"), "--clips", "1", "--tasks", "keyframes", "--json", str(again),
+             "--decoder-steps", "2", "--refine-final-iters", "10"] + _models(runs)
+    assert main(quick) == 0
+    first = json.loads(again.read_text())["tasks"]["keyframes"]
+    assert main(quick) == 0
+    second = json.loads(again.read_text())["tasks"]["keyframes"]
     assert {k: {m: v for m, v in r.items() if m != "seconds_per_motion"} for k, r in first.items()} == \
         {k: {m: v for m, v in r.items() if m != "seconds_per_motion"} for k, r in second.items()}
 
@@ -260,7 +262,7 @@ def test_eval_control_from_the_clips_own_tokens(runs, tmp_path, capsys):
     assert main(["eval", "control", "--data", str(runs / "data"), "--source", "tokens", "--clips", "1", "--scenes", "1",
                  "--tokenizer", str(runs / "tok"), "--json", str(out)] + FAST) == 0
     tasks = json.loads(out.read_text())["tasks"]
-    assert list(tasks["trajectory"]) == ["none", "motok", "gmd", "inpaint"]
+    assert list(tasks["trajectory"]) == ["none", "motok", "gmd", "inpaint", "gmd+motok", "gmd+motok + physics"]
     assert tasks["trajectory"]["motok"]["avg_error_m"] < tasks["trajectory"]["none"]["avg_error_m"]
     assert main(["eval", "control", "--data", str(tmp_path / "missing")]) == 2
     assert "--data" in capsys.readouterr().err

@@ -15,7 +15,7 @@ import argparse
 import json
 from pathlib import Path
 
-from motok_robot.control.options import add_control_arguments, has_control
+from motok_robot.control.options import add_control_arguments, add_mechanism_arguments, has_control
 from motok_robot.errors import InputError
 
 
@@ -47,7 +47,9 @@ def register(commands, groups) -> None:
     ev.add_argument("--planner", choices=("masked", "ar"), default="masked", help="planner (default masked)")
     ev.add_argument("--tokenizer", type=Path, default=None, help="tokenizer run (default models/tokenizer)")
     ev.add_argument("--planner-run", type=Path, default=None, help="planner run (default models/planner_<kind>)")
-    ev.add_argument("--guidance", default=None, help="the default mechanism(s) of the dual-path rows (default motok)")
+    ev.add_argument("--guidance", default=None, help="the default mechanism(s) of the dual-path rows (default gmd,motok)")
+    add_mechanism_arguments(ev)
+    ev.add_argument("--foot-physics", action="store_true", help="physics terms (no foot sliding or sinking) in every controlled row")
     ev.add_argument("--decoder-steps", type=int, default=None, help="decoder DDIM steps (default: the tokenizer's)")
     ev.add_argument("--max-seconds", type=float, default=None, help="crop clips to this length")
     ev.add_argument("--seed", type=int, default=0, help="base seed (clip i uses seed + i)")
@@ -81,7 +83,6 @@ def generate_command(args: argparse.Namespace, planner_handler) -> int:
 
 
 def _eval_control(args: argparse.Namespace) -> int:
-    from motok_robot.control.config import ControlConfig
     from motok_robot.control.evaluate import ControlEvalConfig, evaluate_control, format_table
 
     over = {}
@@ -99,17 +100,18 @@ def _eval_control(args: argparse.Namespace) -> int:
         if args.max_seconds <= 0:
             raise InputError(f"--max-seconds must be positive (got {args.max_seconds:g})")
         over["max_frames"] = max(1, round(args.max_seconds * 20))
-    if args.guidance is not None:
-        over["control"] = ControlConfig(mechanisms=args.guidance)
-        if over["control"].mechanisms == ("none",):
-            raise InputError("--guidance none: the default mechanism of the controlled rows must be a real one")
+    from motok_robot.control.options import control_config_from_args
+
+    over["control"] = control_config_from_args(args)
+    if over["control"].mechanisms == ("none",):
+        raise InputError("--guidance none: the default mechanism of the controlled rows must be a real one")
     if args.seed < 0:
         raise InputError(f"--seed must be >= 0 (got {args.seed})")
     if not args.data.is_dir():
         raise InputError(f"--data {args.data}: not a directory (a prepared dataset from `motok-robot data prepare`)")
     if args.json is not None and args.json.is_dir():
         raise InputError(f"--json {args.json}: is a directory")
-    config = ControlEvalConfig(seed=args.seed, **over)
+    config = ControlEvalConfig(seed=args.seed, foot_physics=args.foot_physics, **over)
     result = evaluate_control(args.data, source=args.source, planner=args.planner, tokenizer_run=args.tokenizer,
                               planner_run=args.planner_run, device=args.device, config=config)
     print(format_table(result))

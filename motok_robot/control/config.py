@@ -17,12 +17,14 @@ class ControlConfig:
     estimate at every step); ``none`` decodes without control.
     """
 
-    mechanisms: tuple[str, ...] = ("motok",)
+    #: default: GMD makes the root path exact, the refinement then meets the other constraints
+    #: and the physics terms (measured in docs/control.md)
+    mechanisms: tuple[str, ...] = ("gmd", "motok")
     #: MoTok refinement: Adam learning rate in normalised feature units, and inner iterations
-    refine_lr: float = 0.05
+    refine_lr: float = 0.1
     refine_iters: int = 4
     #: iterations at the final (clean) step, where the constraint is enforced precisely
-    refine_final_iters: int = 150
+    refine_final_iters: int = 300
     #: GMD dense guidance scale s (mu_t -= (1 - M) s Sigma_t grad)
     gmd_scale: float = 50.0
     #: GMD: impute the root trajectory in x0 at every step

@@ -18,9 +18,10 @@ Each task is generated under several settings with fixed seeds (``seed + clip in
 * with a planner (``source="planner"``, the clip's first caption as text): ``none`` (no
   control; the constraints only measure), ``planner only`` / ``decoder only`` / ``both`` (the
   dual path, default mechanism), then ``both`` with each decoder mechanism (refinement, GMD,
-  inpainting);
+  inpainting), and ``both`` with the default mechanism and the physics terms;
 * without a planner (``source="tokens"``): the clip's own tokens (encoded ground truth) are
-  decoded with each mechanism, which isolates the decoder's part.
+  decoded with each mechanism (and the default one with the physics terms), which isolates
+  the decoder's part.
 
 Metrics per row: :func:`motok_robot.control.metrics.control_table`.
 """
@@ -61,6 +62,9 @@ class ControlEvalConfig:
     obstacle_clearance_m: float = 0.2  #: gap between the pelvis path and the obstacle's edge
     mechanisms: tuple[str, ...] = ("motok", "gmd", "inpaint")
     decoder_steps: int | None = None
+    #: add the physics terms (feet in contact do not slide or sink) to every controlled row
+    #: (the ``+ physics`` row has them in any case)
+    foot_physics: bool = False
     tasks: tuple[str, ...] = TASKS
     control: ControlConfig = field(default_factory=ControlConfig)
 
@@ -211,30 +215,32 @@ class _Runner:
         return joints_from_features(feats[0].detach().cpu().numpy().astype(np.float64))
 
 
-def settings_for(source: str, task: str, mechanisms: tuple[str, ...], default: tuple[str, ...]) -> list[tuple[str, str, tuple[str, ...], bool]]:
-    """Rows of one task: ``(name, control_path, mechanisms, with_obstacles)``."""
-    rows: list[tuple[str, str, tuple[str, ...], bool]] = []
-    name_of = "+".join
+def settings_for(source: str, task: str, mechanisms: tuple[str, ...], default: tuple[str, ...]) -> list[tuple[str, str, tuple[str, ...], bool, bool]]:
+    """Rows of one task: ``(name, control_path, mechanisms, with_obstacles, foot_physics)``."""
+    rows: list[tuple[str, str, tuple[str, ...], bool, bool]] = []
+    d = "+".join(default)
     if task == "obstacles":
-        rows.append(("ground truth", "", (), True))
+        rows.append(("ground truth", "", (), True, False))
     if source == "planner":
-        rows.append(("none", "both", ("none",), True))
+        rows.append(("none", "both", ("none",), True, False))
         if task == "trajectory":
-            rows += [("planner only", "planner", default, True), ("decoder only", "decoder", default, True)]
+            rows += [("planner only", "planner", default, True, False), ("decoder only", "decoder", default, True, False)]
         if task == "obstacles":
-            rows.append((f"both {name_of(default)}, no obstacle term", "both", default, False))
-        rows.append((f"both {name_of(default)}", "both", default, True))
+            rows.append((f"both {d}, no obstacle term", "both", default, False, False))
+        rows.append((f"both {d}", "both", default, True, False))
         if task == "trajectory":
-            rows += [(f"both {name_of((m,))}", "both", (m,), True) for m in mechanisms if (m,) != default]
+            rows += [(f"both {m}", "both", (m,), True, False) for m in mechanisms if (m,) != default]
+        rows.append((f"both {d} + physics", "both", default, True, True))
     else:
-        rows.append(("none", "decoder", ("none",), True))
+        rows.append(("none", "decoder", ("none",), True, False))
         if task == "obstacles":
-            rows.append((f"{name_of(default)}, no obstacle term", "decoder", default, False))
-            rows.append((name_of(default), "decoder", default, True))
+            rows.append((f"{d}, no obstacle term", "decoder", default, False, False))
+            rows.append((d, "decoder", default, True, False))
         else:
-            rows += [(m, "decoder", (m,), True) for m in mechanisms]
+            rows += [(m, "decoder", (m,), True, False) for m in mechanisms]
             if default not in [(m,) for m in mechanisms]:
-                rows.append((name_of(default), "decoder", default, True))
+                rows.append((d, "decoder", default, True, False))
+        rows.append((f"{d} + physics", "decoder", default, True, True))
     return rows
 
 
@@ -295,7 +301,7 @@ def evaluate_control(
     bar = tqdm(total=total, desc="eval control", unit="motion", disable=None if progress is None else not progress)
     tasks: dict[str, dict[str, Any]] = {}
     started = time.perf_counter()
-    for task, clips, cons, (name, path, mechanisms, with_obstacles) in plan:
+    for task, clips, cons, (name, path, mechanisms, with_obstacles, physics) in plan:
         per_clip = []
         t0 = time.perf_counter()
         for clip, c in zip(clips, cons):
@@ -303,6 +309,8 @@ def evaluate_control(
                 joints = clip.joints
             else:
                 guide = c if with_obstacles else without_obstacles(c)
+                if (physics or config.foot_physics) and guide is not None:
+                    guide = replace(guide, foot_physics=True)
                 joints = runner.run(clip, None if mechanisms == ("none",) else guide, path, mechanisms)
                 bar.update(1)
             per_clip.append(clip_metrics(joints, c))
@@ -332,6 +340,7 @@ COLUMNS = (
     ("floating_mm", "float mm"),
     ("obstacle_hit_fraction", "obst hit"),
     ("obstacle_depth_max_cm", "obst cm"),
+    ("bone_change_cm", "bone cm"),
 )
 
 

@@ -93,7 +93,9 @@ def foot_loss(joints: torch.Tensor) -> torch.Tensor:
     """Physics terms: feet in contact do not slide, feet never go below the floor (z = 0), ``[B]``."""
     feet = joints[:, :, list(FOOT_JOINTS), :]
     height = feet[..., 2]
-    contact = torch.sigmoid((FOOT_CONTACT_HEIGHT - height) / FOOT_CONTACT_SOFTNESS)
+    # the contact weight is a label, not something to optimise: with its gradient the cheapest
+    # way to "stop sliding" is lifting the feet above the contact height (floating feet)
+    contact = torch.sigmoid((FOOT_CONTACT_HEIGHT - height.detach()) / FOOT_CONTACT_SOFTNESS)
     both = contact[:, 1:] * contact[:, :-1]
     slide = (feet[:, 1:, :, :2] - feet[:, :-1, :, :2]).pow(2).sum(-1)
     below = (-height).clamp(min=0.0).pow(2)

@@ -22,7 +22,7 @@ from motok_robot.control.constraints import Constraints
 from motok_robot.control.losses import ConstraintTensors, obstacle_distance
 from motok_robot.errors import InputError
 from motok_robot.motion.metrics import foot_ground_distances, foot_skating_ratio
-from motok_robot.motion.skeleton import FPS
+from motok_robot.motion.skeleton import FPS, PARENTS
 
 #: thresholds of the trajectory / location error (m)
 FAIL_FAR = 0.5
@@ -59,10 +59,20 @@ def obstacle_penetration(joints, constraints: Constraints) -> float:
     return float((-d).clamp(min=0.0).max())
 
 
+def bone_length_change(joints) -> float:
+    """Mean absolute change (m) of the 21 bone lengths of ``joints [T, 22, 3]`` around their
+    per-clip median: 0 for a rigid skeleton. Position-space edits (refinement, imputation) act on
+    joint positions that are not tied together, so this shows whether they stretch limbs."""
+    j = np.asarray(joints, dtype=np.float64)
+    child = np.arange(1, len(PARENTS))
+    lengths = np.linalg.norm(j[:, child] - j[:, [PARENTS[c] for c in child]], axis=-1)  # [T, 21]
+    return float(np.abs(lengths - np.median(lengths, axis=0)).mean())
+
+
 def clip_metrics(joints, constraints: Constraints, fps: float = FPS) -> dict[str, float]:
     """Per-clip numbers: ``max_error_m``, ``mean_error_m``, ``keyframes``, ``keyframes_far``
     (over 50 cm), ``foot_skating_ratio``, foot ``penetration_mean_mm`` / ``floating_mean_mm``,
-    ``obstacle_depth_m``."""
+    ``obstacle_depth_m``, ``bone_change_m``."""
     j = _check(joints, constraints)
     errors = keyframe_errors(j, constraints)
     ground = foot_ground_distances(j)
@@ -75,6 +85,7 @@ def clip_metrics(joints, constraints: Constraints, fps: float = FPS) -> dict[str
         "penetration_mean_mm": ground["penetration_mean_mm"],
         "floating_mean_mm": ground["floating_mean_mm"],
         "obstacle_depth_m": obstacle_penetration(j, constraints),
+        "bone_change_m": bone_length_change(j),
     }
 
 
@@ -86,7 +97,8 @@ def control_table(per_clip: list[dict[str, float]]) -> dict[str, float]:
     ``avg_error_m`` / ``avg_error_cm``: mean over clips of the clip's mean keyframe error;
     ``foot_skating_ratio``, ``penetration_mm``, ``floating_mm``: means over clips;
     ``obstacle_hit_fraction``: fraction of clips where a joint entered an obstacle
-    (deeper than 1 mm), ``obstacle_depth_max_cm``: the deepest.
+    (deeper than 1 mm), ``obstacle_depth_max_cm``: the deepest; ``bone_change_cm``: mean
+    :func:`bone_length_change` (a check that control does not stretch the skeleton).
     """
     if not per_clip:
         raise InputError("control_table: no clips")
@@ -105,4 +117,5 @@ def control_table(per_clip: list[dict[str, float]]) -> dict[str, float]:
         "floating_mm": float(np.mean([m["floating_mean_mm"] for m in per_clip])),
         "obstacle_hit_fraction": float(np.mean([m["obstacle_depth_m"] > 1e-3 for m in per_clip])),
         "obstacle_depth_max_cm": float(max(m["obstacle_depth_m"] for m in per_clip) * 100.0),
+        "bone_change_cm": float(np.mean([m["bone_change_m"] for m in per_clip]) * 100.0),
     }

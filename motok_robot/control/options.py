@@ -27,11 +27,22 @@ def add_control_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--foot-physics", action="store_true", help="feet in contact do not slide or sink (physics-aware decoding)")
     group.add_argument(
         "--guidance",
-        default="motok",
-        help=f"decoder mechanisms, comma-separated from {', '.join(MECHANISMS)} (default motok)",
+        default=None,
+        help=f"decoder mechanisms, comma-separated from {', '.join(MECHANISMS)}, applied in this order "
+        f"(default {','.join(ControlConfig().mechanisms)})",
     )
-    group.add_argument("--guidance-scale", type=float, default=None, help="GMD dense-guidance scale s")
+    add_mechanism_arguments(group)
     group.add_argument("--control-path", choices=("both", "planner", "decoder"), default="both", help="send local conditions to the planner, the decoder, or both")
+
+
+def add_mechanism_arguments(group) -> None:
+    """Settings of the decoder mechanisms (defaults: :class:`ControlConfig`)."""
+    d = ControlConfig()
+    group.add_argument("--guidance-scale", type=float, default=None, help=f"GMD dense-guidance scale s (default {d.gmd_scale:g})")
+    group.add_argument("--refine-lr", type=float, default=None, help=f"MoTok refinement step size eta (default {d.refine_lr:g})")
+    group.add_argument("--refine-iters", type=int, default=None, help=f"MoTok refinement iterations per denoising step (default {d.refine_iters})")
+    group.add_argument("--refine-final-iters", type=int, default=None,
+                       help=f"MoTok refinement iterations at the last, clean step (default {d.refine_final_iters})")
 
 
 def has_control(args: argparse.Namespace) -> bool:
@@ -62,9 +73,17 @@ def constraints_from_args(args: argparse.Namespace, frames: int):
 
 
 def control_config_from_args(args: argparse.Namespace) -> ControlConfig:
-    cfg = ControlConfig(mechanisms=args.guidance)
-    if args.guidance_scale is not None:
-        cfg.gmd_scale = args.guidance_scale
+    from motok_robot.errors import InputError
+
+    cfg = ControlConfig() if args.guidance is None else ControlConfig(mechanisms=args.guidance)
+    for option, attr, low in (("guidance_scale", "gmd_scale", 0.0), ("refine_lr", "refine_lr", 0.0),
+                              ("refine_iters", "refine_iters", 0), ("refine_final_iters", "refine_final_iters", 0)):
+        value = getattr(args, option, None)
+        if value is None:
+            continue
+        if not (value >= low and np.isfinite(value)):
+            raise InputError(f"--{option.replace('_', '-')} must be >= {low:g} (got {value})")
+        setattr(cfg, attr, value)
     return cfg
 
 
