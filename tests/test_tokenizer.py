@@ -264,6 +264,13 @@ def test_resume_equals_uninterrupted_training(tmp_path):
     assert part["steps"] == 3
     with pytest.raises(InputError, match="--resume"):
         train_tokenizer(train, val, mean, std, tmp_path / "part", tok_cfg, cfg, progress=False)
+    # a kill between writing the weights and the state is detected, not silently mixed
+    import shutil
+
+    shutil.copytree(tmp_path / "part", tmp_path / "torn")
+    save_tokenizer(load_tokenizer(tmp_path / "torn", device="cpu"), tmp_path / "torn", step=4)
+    with pytest.raises(InputError, match="step 4 but train_state.safetensors from step 3"):
+        train_tokenizer(train, val, mean, std, tmp_path / "torn", resume=True, progress=False)
     resumed = train_tokenizer(train, val, mean, std, tmp_path / "part", resume=True, progress=False)
     assert resumed["steps"] == 6
     a = load_file(str(tmp_path / "full" / "model.safetensors"))

@@ -64,8 +64,11 @@ def read_run_config(run_dir: str | Path) -> dict[str, Any]:
     return data
 
 
-def save_tokenizer(tokenizer: MoTok, run_dir: str | Path, train: dict[str, Any] | None = None) -> Path:
-    """Write ``config.json`` and ``model.safetensors`` of ``tokenizer`` into ``run_dir`` (created)."""
+def save_tokenizer(tokenizer: MoTok, run_dir: str | Path, train: dict[str, Any] | None = None, step: int | None = None) -> Path:
+    """Write ``config.json`` and ``model.safetensors`` of ``tokenizer`` into ``run_dir`` (created).
+
+    ``train`` (the training config as a dict) goes into config.json; ``step`` (training step of
+    these weights) into the safetensors metadata, where resuming checks it against the state."""
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     if train is None and (run_dir / CONFIG_FILE).is_file():
@@ -73,7 +76,10 @@ def save_tokenizer(tokenizer: MoTok, run_dir: str | Path, train: dict[str, Any] 
             train = json.loads((run_dir / CONFIG_FILE).read_text()).get("train")
         except (json.JSONDecodeError, AttributeError):
             train = None
-    atomic_save_tensors(tokenizer.state_dict(), run_dir / WEIGHTS_FILE, metadata={"format": FORMAT, "version": str(FORMAT_VERSION)})
+    metadata = {"format": FORMAT, "version": str(FORMAT_VERSION)}
+    if step is not None:
+        metadata["step"] = str(int(step))
+    atomic_save_tensors(tokenizer.state_dict(), run_dir / WEIGHTS_FILE, metadata=metadata)
     write_config(run_dir, tokenizer.config, train)
     return run_dir
 

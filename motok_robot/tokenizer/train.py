@@ -256,6 +256,13 @@ def train_tokenizer(
         with safe_open(str(state_path), framework="pt") as fh:
             meta = fh.metadata() or {}
         info = json.loads(meta["info"])
+        with safe_open(str(out / WEIGHTS_FILE), framework="pt") as fh:
+            weights_step = (fh.metadata() or {}).get("step")
+        if weights_step is not None and int(weights_step) != int(info["step"]):
+            raise InputError(
+                f"{out}: {WEIGHTS_FILE} is from step {weights_step} but {STATE_FILE} from step {info['step']} "
+                "(the run was killed while writing a checkpoint); restart the run or restore both files"
+            )
         _load_optimizer(optimizer, {k: v.to(device) if not k.endswith(".step") else v for k, v in tensors.items()}, info["param_groups"])
         generator.set_state(tensors["rng"])
         step = int(info["step"])
@@ -266,7 +273,7 @@ def train_tokenizer(
     model.train()
 
     def checkpoint() -> None:
-        save_tokenizer(model, out, train=train_dict)
+        save_tokenizer(model, out, train=train_dict, step=step)  # weights first, then the state
         tensors, groups = _optimizer_tensors(optimizer)
         tensors["rng"] = generator.get_state()
         info = {"step": step, "running": running, "running_n": running_n, "param_groups": groups, "total": total}
