@@ -17,12 +17,12 @@ def register(commands, groups) -> None:
         "retarget",
         help="retarget a human motion onto a robot (contact-aware trajectory optimisation)",
         description=(
-            "Retarget INPUT (motion.npz from generation, or a BVH / ASF+AMC / DeepMimic JSON mocap file) onto a "
+            "Retarget INPUT (motion.npz from generation, or a BVH / ASF+AMC / DeepMimic mocap file) onto a "
             "robot with windowed CasADi/IPOPT trajectory optimisation: keypoint tracking, planted feet during "
             "contact phases, joint and velocity limits. Writes robot.npz (docs/CONTRACTS.md)."
         ),
     )
-    p.add_argument("input", metavar="INPUT", help="motion.npz, .bvh, .amc (with its .asf) or DeepMimic .json")
+    p.add_argument("input", metavar="INPUT", help="motion.npz, .bvh, .amc (with its .asf) or DeepMimic .json/.txt")
     p.add_argument("--robot", required=True, help="robot name (motok-robot robots list) or path to its MJCF/description")
     p.add_argument("--out", required=True, help="output robot.npz")
     p.add_argument("--window", type=int, default=d.window, help=f"frames optimised together (default {d.window})")

@@ -1,7 +1,8 @@
 """Files in and out of retargeting.
 
 Input: ``motion.npz`` from generation (``joints`` float32 ``[T, 22, 3]`` metres z-up, ``fps``),
-or a mocap file imported with :mod:`motok_robot.data` (BVH, ASF+AMC, DeepMimic JSON).
+or a mocap file imported with :mod:`motok_robot.data` (BVH, ASF+AMC, DeepMimic JSON in a
+``.json`` or ``.txt`` file).
 
 Output: ``robot.npz`` exactly as in docs/CONTRACTS.md::
 
@@ -28,7 +29,7 @@ import numpy as np
 
 from motok_robot.errors import InputError
 
-MOCAP_SUFFIXES = (".bvh", ".amc", ".json")
+MOCAP_SUFFIXES = (".bvh", ".amc", ".json", ".txt")
 
 
 @dataclass
@@ -62,7 +63,7 @@ def read_mocap(path: str | Path, skeleton: str = "bandai", asf: str | Path | Non
     """Import a mocap file onto the canonical body (20 fps) with :mod:`motok_robot.data`.
 
     ``.bvh``: ``skeleton`` is ``bandai``, ``acrnn`` or a joint-map JSON path; ``.amc``: the
-    skeleton file is ``asf`` or the only ``.asf`` next to it; ``.json``: DeepMimic motion.
+    skeleton file is ``asf`` or the only ``.asf`` next to it; ``.json`` / ``.txt``: DeepMimic motion.
     """
     path = Path(path)
     if not path.exists():
@@ -82,12 +83,12 @@ def read_mocap(path: str | Path, skeleton: str = "bandai", asf: str | Path | Non
                     raise InputError(f"{path}: give the skeleton file with --asf ({len(candidates)} .asf files next to it)")
                 asf = candidates[0]
             clip = load_clip(asf, path, fps=amc_fps)
-        elif suffix == ".json":
+        elif suffix in (".json", ".txt"):
             from motok_robot.data.deepmimic import load_clip
 
             clip = load_clip(path)
         else:
-            raise InputError(f"{path}: unknown input type {suffix!r} (motion.npz, .bvh, .amc, DeepMimic .json)")
+            raise InputError(f"{path}: unknown input type {suffix!r} (motion.npz, .bvh, .amc, DeepMimic .json/.txt)")
     except InputError:
         raise
     except (OSError, UnicodeDecodeError, ValueError, KeyError, IndexError) as exc:
