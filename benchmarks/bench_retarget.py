@@ -212,6 +212,12 @@ def main(argv=None) -> int:
                 entry["per_frame"] = mb.as_dict() | {"seconds": res_b.solve_seconds, "cpu_seconds": cpu_b,
                                                      "fps_wall": len(joints) / res_b.solve_seconds,
                                                      "failed_frames": len(res_b.failed_windows())}
+            if name == motions[0][0] and not args.no_baseline:
+                from retarget.plots import plot_result
+
+                png = args.out.parent / f"retarget_{robot_name}.png"
+                plot_result(png, traj.kin, res, baseline=res_b, title=f"{robot_name}: {name}")
+                print(f"  wrote {png}")
             report["clips"].append(entry)
             rows.append(entry)
             pf = entry.get("per_frame")

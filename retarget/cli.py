@@ -32,6 +32,7 @@ def register(commands, groups) -> None:
     p.add_argument("--no-scale", action="store_true", help="use the joints as robot targets unscaled (motion already robot-sized)")
     p.add_argument("--skeleton", default="bandai", help="BVH joint map: bandai, acrnn or a joint-map JSON file (default bandai)")
     p.add_argument("--asf", default=None, help="ASF skeleton file for an .amc input (default: the only .asf next to it)")
+    p.add_argument("--plot", default=None, metavar="FILE.png", help="also draw the result (targets vs robot, sole heights, errors)")
     p.set_defaults(func=run)
 
 
@@ -77,4 +78,8 @@ def run(args: argparse.Namespace) -> int:
         )
     path = write_robot_npz(args.out, result)
     print(f"wrote {path}")
+    if args.plot:
+        from retarget.plots import plot_result
+
+        print(f"wrote {plot_result(args.plot, retargeter.kin, result, title=f'{robot.name}: {motion.name}')}")
     return 0

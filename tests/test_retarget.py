@@ -391,6 +391,14 @@ def test_robot_npz_round_trip(robot, small, tmp_path):
         assert json.loads(str(raw["solver_status"]))[0]["start"] == 0
 
 
+def test_plot_writes_png(robot, small, tmp_path):
+    from retarget.plots import plot_result
+
+    res = small.run(synthetic_walk(T=20), 20.0, progress=False)
+    path = plot_result(tmp_path / "r.png", small.kin, res, baseline=res)
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 10000
+
+
 def test_quaternion_output_matches_solver_orientation(robot, small):
     """qpos quaternions put the robot where the solver variables say (MuJoCo FK on the output)."""
     human = synthetic_walk(T=20)
