@@ -5,9 +5,9 @@ Decision variables, for each of the ``W`` frames of a window (``nx = 6 + nj`` pe
     x[t] = (base x, y, z [m], yaw, pitch, roll [rad], joint angles [nj] in robot.joint_names order)
 
 **Base orientation.** ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)`` (intrinsic z-y-x Euler angles).
-Yaw is an unbounded, *unwrapped* angle warm-started from the unwrapped human heading, so
-turning through +-pi never flips; it is also bounded to the human heading +-
-``SolverConfig.max_yaw_offset``. Pitch and roll are bounded to ``+-SolverConfig.max_tilt``
+Yaw is an *unwrapped* angle (never wrapped to +-pi) warm-started from the unwrapped human
+heading and bounded to that heading +- ``SolverConfig.max_yaw_offset``, so turning through
++-pi never flips. Pitch and roll are bounded to ``+-SolverConfig.max_tilt``
 (1 rad < pi/2, away from the only singularity of this parametrisation) and the base height
 to ``SolverConfig.base_height_range`` x its nominal height: these box bounds keep the
 optimiser out of flipped or lying-down local minima. No unit-norm constraint is needed
@@ -34,7 +34,7 @@ committed frames before the window; ``|joints - nominal|^2``; base tilt; optiona
   sole edge direction unchanged (``cross_z = 0``); chained across the seam to the committed
   frame before the window.
 
-Joint bounds and the pitch bound are variable bounds.
+Joint ranges and the base tilt, yaw and height bounds are variable bounds (no rows in ``g``).
 """
 
 from __future__ import annotations
