@@ -189,3 +189,24 @@ def test_errors_name_the_missing_piece_and_the_command_to_make_it(env, tmp_path,
     bad.write_text(json.dumps({"widht": 3}))
     assert "unknown field(s) ['widht']" in error(["train", "evaluator", "--data", data, "--out", str(tmp_path / "c"),
                                                   "--config", str(bad)])
+
+
+def test_eval_with_the_official_evaluator_files(env, tmp_path, capsys):
+    from test_eval_official import write_release
+
+    ckpt, glove, mean, std = write_release(tmp_path)
+    texts = tmp_path / "hml_texts"
+    texts.mkdir()
+    lines = [f"{who} {action}#{who.split()[0]}/DET {' '.join(w + '/VERB' for w in (who.split()[1:] + action.split()))}#0.0#0.0"
+             for who in ("a person", "someone") for action in ACTIONS]
+    (texts / "000001.txt").write_text("\n".join(lines) + "\n")
+    base = ["eval", "evaluator", "--data", str(env / "data"), "--official", str(ckpt), "--glove", str(glove),
+            "--mean", str(mean), "--std", str(std), "--repeats", "2"]
+    out = tmp_path / "official.json"
+    assert main(base + ["--hml-texts", str(texts), "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["evaluator"].startswith("official HumanML3D evaluator") and result["n_clips"] == 40
+    assert len(result["rows"][0]["metrics"]["r_precision_top1"]["values"]) == 2
+    capsys.readouterr()
+    assert main(base) == 2  # without POS-tagged captions the official text encoder cannot run
+    assert "has no HumanML3D token string" in capsys.readouterr().err
