@@ -148,14 +148,16 @@ def clean_stdout(text: str) -> str:
     return "\n".join(lines[-60:])
 
 
-def write_report(outcomes: list[Outcome], path: Path, results: Path, command: str) -> None:
+def write_report(outcomes: list[Outcome], path: Path, results: Path, command: str, report_only: bool = False) -> None:
     machine = machine_description()
+    where = ("Report assembled from earlier JSON (each section names the machine it was measured on) on"
+             if report_only else "Measured on")
     lines = ["# Benchmark results", "",
              f"Regenerate with `{command}` (writes this file and `benchmarks/results/*.json`).", "",
-             f"Measured on: {machine_summary(machine)}; {machine['date_utc']}.", "",
+             f"{where}: {machine_summary(machine)}; {machine['date_utc']}.", "",
              "| benchmark | status | wall s |", "|---|---|---:|"]
     for o in outcomes:
-        lines.append(f"| {o.invocation.name} | {o.status} | {o.seconds:.1f} |")
+        lines.append(f"| {o.invocation.name} | {o.status} | {f'{o.seconds:.1f}' if o.seconds else '-'} |")
     for o in outcomes:
         lines += ["", f"## {o.invocation.name}", ""]
         rel = o.invocation.script.relative_to(REPO_ROOT)
@@ -216,7 +218,7 @@ def main() -> int:
     else:
         outcomes = [run(inv, args.timeout) for inv in invocations]
     command = "python benchmarks/bench_all.py" + (f" --data {args.data}" if args.data else "")
-    write_report(outcomes, args.markdown, args.results.resolve(), command)
+    write_report(outcomes, args.markdown, args.results.resolve(), command, report_only=args.report_only)
     print(f"written {args.markdown}")
     failed = [o.invocation.name for o in outcomes if o.status.startswith(("failed", "timed out"))]
     if failed:
