@@ -122,3 +122,17 @@ def test_clip_length_from_the_files(tmp_path):
     assert frames_from_args(args()) == 120
     assert frames_from_args(args(edit=str(motion))) == 50
     assert frames_from_args(args(prefix=str(motion), suffix=str(motion))) == 120  # 50 + 50 + 20 < 6 s
+
+
+def test_bone_term_is_zero_for_a_rigid_skeleton_and_pulls_a_stretched_limb_back(walk):
+    from motok_robot.control.losses import bone_loss
+
+    rigid = torch.as_tensor(walk, dtype=torch.float32)[None]
+    assert float(bone_loss(rigid)[0]) < 1e-10
+    stretched = rigid.clone()
+    stretched[:, 20:, 21, 2] -= 0.2  # the right wrist drops 20 cm away from the elbow in the last frames
+    stretched.requires_grad_(True)
+    loss = bone_loss(stretched)
+    loss.sum().backward()
+    assert float(loss[0]) > 1e-4
+    assert float(stretched.grad[0, 25, 21, 2]) < 0  # descent moves the wrist back up

@@ -31,6 +31,8 @@ class ControlConfig:
     gmd_impute: bool = True
     obstacle_weight: float = 10.0
     foot_weight: float = 1.0
+    #: keeps bone lengths (joint positions from features are not tied by bones)
+    bone_weight: float = 10.0
     #: make prefix / suffix frames exact after sampling (in-betweening)
     exact_seams: bool = True
 

@@ -81,7 +81,7 @@ class _Hook:
 
     def loss(self, features: torch.Tensor) -> torch.Tensor:
         joints = joints_from_features(features)
-        return control_loss(joints, self.ct, self.config.obstacle_weight, self.config.foot_weight)
+        return control_loss(joints, self.ct, self.config.obstacle_weight, self.config.foot_weight, self.config.bone_weight)
 
 
 class Refinement(_Hook):

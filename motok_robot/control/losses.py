@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from motok_robot.control.constraints import Constraints
-from motok_robot.motion.skeleton import JOINT_INDEX
+from motok_robot.motion.skeleton import JOINT_INDEX, PARENTS
 
 FOOT_JOINTS = (JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"])
 #: a foot is in contact below this height (m), the metric's threshold
@@ -102,9 +102,27 @@ def foot_loss(joints: torch.Tensor) -> torch.Tensor:
     return (both * slide).mean(dim=(1, 2)) + below.mean(dim=(1, 2))
 
 
-def control_loss(joints: torch.Tensor, ct: ConstraintTensors, obstacle_weight: float = 1.0, foot_weight: float = 1.0) -> torch.Tensor:
+_CHILDREN = list(range(1, len(PARENTS)))
+_PARENTS = [PARENTS[c] for c in _CHILDREN]
+
+
+def bone_loss(joints: torch.Tensor) -> torch.Tensor:
+    """Squared change (m^2) of the 21 bone lengths around their per-clip median, ``[B]``.
+
+    Joint positions from features are not tied by bones, so pulling a foot or a wrist towards
+    a target could stretch the limb; the median (no gradient) is the skeleton the decoder made.
+    """
+    lengths = torch.linalg.norm(joints[:, :, _CHILDREN] - joints[:, :, _PARENTS], dim=-1)  # [B, T, 21]
+    reference = lengths.detach().median(dim=1, keepdim=True).values
+    return (lengths - reference).pow(2).mean(dim=(1, 2))
+
+
+def control_loss(joints: torch.Tensor, ct: ConstraintTensors, obstacle_weight: float = 1.0, foot_weight: float = 1.0,
+                 bone_weight: float = 0.0) -> torch.Tensor:
     """Sum of all active terms, ``[B]``."""
     loss = position_loss(joints, ct) + obstacle_weight * obstacle_loss(joints, ct)
     if ct.foot_physics:
         loss = loss + foot_weight * foot_loss(joints)
+    if bone_weight > 0:
+        loss = loss + bone_weight * bone_loss(joints)
     return loss

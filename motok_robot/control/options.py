@@ -14,7 +14,7 @@ from motok_robot.control.config import MECHANISMS, ControlConfig
 
 
 def add_control_arguments(parser: argparse.ArgumentParser) -> None:
-    group = parser.add_argument_group("kinematic control (file formats: README, examples/)")
+    group = parser.add_argument_group("kinematic control (file formats: docs/control.md, examples/)")
     group.add_argument("--trajectory", metavar="FILE",
                        help="root trajectory on the ground: .csv (frame,x,y[,z] rows; or x,y[,z] per frame without "
                        "header), .npz (root [T, 2|3]) or .npy [T, 2|3] (NaN = free); sets the length without --seconds")
