@@ -52,6 +52,7 @@ def test_control_table_fractions():
     assert row["traj_fail_50cm"] == pytest.approx(1 / 3) and row["traj_fail_20cm"] == pytest.approx(2 / 3)
     assert row["location_fail_50cm"] == pytest.approx(1 / 10)
     assert row["avg_error_m"] == pytest.approx(0.15) and row["avg_error_cm"] == pytest.approx(15.0)
+    assert row["max_error_cm"] == pytest.approx(60.0)
     assert row["obstacle_hit_fraction"] == pytest.approx(1 / 3) and row["obstacle_depth_max_cm"] == pytest.approx(2.0)
     with pytest.raises(InputError):
         control_table([])

@@ -335,6 +335,7 @@ COLUMNS = (
     ("location_fail_50cm", "loc>50cm"),
     ("avg_error_m", "avg err m"),
     ("avg_error_cm", "avg err cm"),
+    ("max_error_cm", "max err cm"),
     ("foot_skating_ratio", "skating"),
     ("penetration_mm", "pen mm"),
     ("floating_mm", "float mm"),

@@ -95,6 +95,7 @@ def control_table(per_clip: list[dict[str, float]]) -> dict[str, float]:
     ``traj_fail_50cm`` / ``traj_fail_20cm``: fraction of clips whose largest keyframe error
     exceeds 50 / 20 cm; ``location_fail_50cm``: fraction of all keyframes over 50 cm;
     ``avg_error_m`` / ``avg_error_cm``: mean over clips of the clip's mean keyframe error;
+    ``max_error_cm``: the largest keyframe error of all clips;
     ``foot_skating_ratio``, ``penetration_mm``, ``floating_mm``: means over clips;
     ``obstacle_hit_fraction``: fraction of clips where a joint entered an obstacle
     (deeper than 1 mm), ``obstacle_depth_max_cm``: the deepest; ``bone_change_cm``: mean
@@ -112,6 +113,7 @@ def control_table(per_clip: list[dict[str, float]]) -> dict[str, float]:
         "location_fail_50cm": float(sum(m["keyframes_far"] for m in keyed) / n_key) if n_key else float("nan"),
         "avg_error_m": avg,
         "avg_error_cm": avg * 100.0,
+        "max_error_cm": float(max(m["max_error_m"] for m in keyed) * 100.0) if keyed else float("nan"),
         "foot_skating_ratio": float(np.mean([m["foot_skating_ratio"] for m in per_clip])),
         "penetration_mm": float(np.mean([m["penetration_mean_mm"] for m in per_clip])),
         "floating_mm": float(np.mean([m["floating_mean_mm"] for m in per_clip])),
