@@ -132,14 +132,12 @@ class TextMotionEvaluator(nn.Module):
 
 
 def save_evaluator(model: TextMotionEvaluator, run_dir: str | Path) -> None:
-    from safetensors.torch import save_file
+    from motok_robot.checkpoint import atomic_save_tensors
 
     run = Path(run_dir)
     run.mkdir(parents=True, exist_ok=True)
     config = {"evaluator": model.cfg.to_dict(), "text_dim": model.text_dim}
-    tmp = run / "model.safetensors.tmp"
-    save_file({k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}, str(tmp))
-    tmp.replace(run / "model.safetensors")
+    atomic_save_tensors(model.state_dict(), run / "model.safetensors")
     (run / "config.json").write_text(json.dumps(config, indent=2))
 
 

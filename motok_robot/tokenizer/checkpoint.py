@@ -13,32 +13,19 @@ Files are written to a temporary name and renamed, so a kill never leaves a torn
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Any
 
 import torch
-from safetensors import SafetensorError
-from safetensors.torch import load_file, save_file
 
+from motok_robot import checkpoint as _shared
+from motok_robot.checkpoint import CONFIG_FILE, WEIGHTS_FILE, atomic_save_tensors, atomic_write_text, load_checked_weights
 from motok_robot.errors import InputError
 from motok_robot.tokenizer.config import FORMAT, FORMAT_VERSION, TokenizerConfig, to_dict, tokenizer_config_from_dict
 from motok_robot.tokenizer.model import MoTok
 
-CONFIG_FILE = "config.json"
-WEIGHTS_FILE = "model.safetensors"
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
-def atomic_save_tensors(tensors: dict[str, torch.Tensor], path: Path, metadata: dict[str, str] | None = None) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    save_file({k: v.detach().contiguous().cpu() for k, v in tensors.items()}, str(tmp), metadata=metadata)
-    os.replace(tmp, path)
+__all__ = ["CONFIG_FILE", "WEIGHTS_FILE", "atomic_save_tensors", "atomic_write_text", "load_tokenizer",
+           "read_run_config", "save_tokenizer", "write_config"]
 
 
 def write_config(run_dir: Path, config: TokenizerConfig, train: dict[str, Any] | None = None) -> None:
@@ -50,18 +37,7 @@ def write_config(run_dir: Path, config: TokenizerConfig, train: dict[str, Any] |
 
 def read_run_config(run_dir: str | Path) -> dict[str, Any]:
     """The parsed ``config.json`` of a run directory (InputError naming the file if bad)."""
-    path = Path(run_dir) / CONFIG_FILE
-    if not path.is_file():
-        raise InputError(f"{path}: tokenizer config not found (is {run_dir} a tokenizer run directory?)")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: not valid JSON ({exc})") from None
-    if not isinstance(data, dict) or data.get("format") != FORMAT or "tokenizer" not in data:
-        raise InputError(f"{path}: not a motok tokenizer config (expected format {FORMAT!r} and a 'tokenizer' section)")
-    if int(data.get("version", 0)) > FORMAT_VERSION:
-        raise InputError(f"{path}: format version {data['version']} is newer than this motok-robot ({FORMAT_VERSION})")
-    return data
+    return _shared.read_run_config(run_dir, stage="tokenizer", fmt=FORMAT, version=FORMAT_VERSION)
 
 
 def save_tokenizer(tokenizer: MoTok, run_dir: str | Path, train: dict[str, Any] | None = None, step: int | None = None) -> Path:
@@ -99,20 +75,8 @@ def load_tokenizer(run_dir: str | Path, device: str | torch.device | None = None
     weights = run_dir / WEIGHTS_FILE
     if not weights.is_file():
         raise InputError(f"{weights}: tokenizer weights not found")
-    try:
-        state = load_file(str(weights))
-    except (SafetensorError, OSError) as exc:
-        raise InputError(f"{weights}: cannot read safetensors file ({exc})") from None
     model = MoTok(config)
-    expected = model.state_dict()
-    missing = sorted(set(expected) - set(state))
-    unexpected = sorted(set(state) - set(expected))
-    if missing or unexpected:
-        raise InputError(f"{weights}: weights do not match {CONFIG_FILE} (missing {missing[:5]}, unexpected {unexpected[:5]})")
-    for key, value in state.items():
-        if value.shape != expected[key].shape:
-            raise InputError(f"{weights}: tensor {key} has shape {tuple(value.shape)}, config expects {tuple(expected[key].shape)}")
-    model.load_state_dict(state)
+    load_checked_weights(model, weights)
     if device is None:
         device = "cuda" if torch.cuda.is_available() else "cpu"
     if str(device).startswith("cuda") and not torch.cuda.is_available():
