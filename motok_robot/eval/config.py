@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
-import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+
+from motok_robot.paths import models_dir
+
+__all__ = ["EvaluatorConfig", "GenerationEvalConfig", "default_evaluator_dir"]
 
 
 @dataclass
@@ -67,12 +70,6 @@ class GenerationEvalConfig:
     batch_size: int = 64  #: texts per generator call
     seed: int = 0
     extra: dict = field(default_factory=dict)
-
-
-def models_dir() -> Path:
-    """``$MOTOK_ROBOT_MODELS`` or ``models/`` at the repository root (as the planner's generate API)."""
-    env = os.environ.get("MOTOK_ROBOT_MODELS")
-    return Path(env) if env else Path(__file__).resolve().parents[2] / "models"
 
 
 def default_evaluator_dir() -> Path:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from motok_robot.errors import InputError
-from motok_robot.eval.config import models_dir
+from motok_robot.paths import models_dir
 
 PLANNER_KINDS = ("masked", "ar")
 

@@ -7,16 +7,15 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from pathlib import Path
 
 from motok_robot.errors import InputError
+from motok_robot.paths import models_dir
 
 
 def default_tokenizer_dir() -> Path:
     """``$MOTOK_ROBOT_MODELS/tokenizer`` or ``models/tokenizer`` at the repository root."""
-    env = os.environ.get("MOTOK_ROBOT_MODELS")
-    return (Path(env) if env else Path(__file__).resolve().parents[2] / "models") / "tokenizer"
+    return models_dir() / "tokenizer"
 
 
 def register(commands, groups) -> None:
