@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from motok_robot.config_utils import dataclass_from_dict
 from motok_robot.paths import models_dir
 
 __all__ = ["EvaluatorConfig", "GenerationEvalConfig", "default_evaluator_dir"]
@@ -47,13 +48,7 @@ class EvaluatorConfig:
 
     @classmethod
     def from_dict(cls, data: dict) -> "EvaluatorConfig":
-        known = {f for f in cls.__dataclass_fields__}
-        unknown = set(data) - known
-        if unknown:
-            from motok_robot.errors import InputError
-
-            raise InputError(f"evaluator config: unknown field(s) {sorted(unknown)}")
-        return cls(**data)
+        return dataclass_from_dict(cls, data, "evaluator config", noun="field")
 
 
 @dataclass

@@ -9,10 +9,10 @@
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
+from motok_robot.config_utils import dataclass_from_dict, dataclass_to_dict
 from motok_robot.errors import InputError
 
 PLANNER_KINDS = ("masked", "ar")
@@ -122,17 +122,12 @@ class SampleConfig:
 
 
 def to_dict(cfg: Any) -> dict[str, Any]:
-    return dataclasses.asdict(cfg)
+    """The config as a JSON-ready dict."""
+    return dataclass_to_dict(cfg)
 
 
 def _from_dict(cls, data: dict[str, Any], where: str):
-    if not isinstance(data, dict):
-        raise InputError(f"{where}: expected a JSON object")
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - names)
-    if unknown:
-        raise InputError(f"{where}: unknown field(s) {unknown}; known: {sorted(names)}")
-    return cls(**data)
+    return dataclass_from_dict(cls, data, where, noun="field")
 
 
 def planner_config_from_dict(data: dict[str, Any], where: str = "planner config") -> PlannerConfig:

@@ -14,12 +14,12 @@ key is an :class:`~motok_robot.errors.InputError` naming the key.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from motok_robot.config_utils import dataclass_from_dict, dataclass_to_dict
 from motok_robot.errors import InputError
 
 FORMAT = "motok-tokenizer"
@@ -138,16 +138,7 @@ class TrainConfig:
 
 
 def _from_dict(cls, data: dict[str, Any], where: str):
-    if not isinstance(data, dict):
-        raise InputError(f"{where}: expected a JSON object, got {type(data).__name__}")
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - names)
-    if unknown:
-        raise InputError(f"{where}: unknown key(s) {unknown}; known: {sorted(names)}")
-    try:
-        return cls(**data)
-    except TypeError as exc:  # pragma: no cover - defensive
-        raise InputError(f"{where}: {exc}") from None
+    return dataclass_from_dict(cls, data, where, noun="key")
 
 
 def tokenizer_config_from_dict(data: dict[str, Any], where: str = "tokenizer config") -> TokenizerConfig:
@@ -159,11 +150,8 @@ def train_config_from_dict(data: dict[str, Any], where: str = "train config") ->
 
 
 def to_dict(config) -> dict[str, Any]:
-    out = dataclasses.asdict(config)
-    for key, value in out.items():
-        if isinstance(value, tuple):
-            out[key] = list(value)
-    return out
+    """The config as a JSON-ready dict (tuples as lists)."""
+    return dataclass_to_dict(config)
 
 
 def read_config_file(path: str | Path) -> tuple[dict[str, Any], dict[str, Any]]:
