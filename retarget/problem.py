@@ -32,7 +32,11 @@ committed frames before the window; ``|joints - nominal|^2``; base tilt; optiona
   contact (in contact it lies on the plane of the other three);
 * per sole, no slip between consecutive contact frames: sole-site ``xy`` unchanged and the
   sole edge direction unchanged (``cross_z = 0``); chained across the seam to the committed
-  frame before the window.
+  frame before the window;
+* swing foot (bounds on the same rows, from :mod:`retarget.swing`): out of contact all four
+  corners at least a clearance above the ground that rises from lift-off and falls to
+  touch-down; in the swing frame next to a contact frame the corners lie in a thin band
+  (flat, low sole) and the sole site moves at most a small step horizontally.
 
 Joint ranges and the base tilt, yaw and height bounds are variable bounds (no rows in ``g``).
 """
@@ -315,9 +319,26 @@ class WindowProblem:
         self.lbx = np.tile(lo, W)
         self.ubx = np.tile(hi, W)
 
-    def constraint_bounds(self, contacts: np.ndarray, prev_contact: np.ndarray | None, vel_step: np.ndarray, ground: float):
+    def constraint_bounds(
+        self,
+        contacts: np.ndarray,
+        prev_contact: np.ndarray | None,
+        vel_step: np.ndarray,
+        ground: float,
+        clearance: np.ndarray | None = None,
+        flat: np.ndarray | None = None,
+        flat_tolerance: float = 0.0,
+        transition_step: float = np.inf,
+    ):
         """Bounds ``(lbg, ubg)`` for a window's contact mask ``[W, 2]`` and the contact state of the
-        frame before it (``None`` = no committed frame before the window)."""
+        frame before it (``None`` = no committed frame before the window).
+
+        ``clearance[W, 2]`` (m, optional): minimum height above ``ground`` of all sole corners in
+        swing frames; ``flat[W, 2]`` bool (optional): swing frames whose corners must also stay
+        below ``ground + clearance + flat_tolerance`` (flat, low sole at lift-off / touch-down);
+        ``transition_step`` (m): largest horizontal sole-site move between a contact frame and
+        the swing frame next to it (lift-off and touch-down; ``inf`` = free).
+        """
         nj = self.kin.nj
         lb, ub = [], []
         inf = np.inf
@@ -328,12 +349,23 @@ class WindowProblem:
                 ub.append(vel_step if has_prev else np.full(nj, inf))
             for s in range(2):
                 on = bool(contacts[t, s])
-                lb.append(np.array([ground, ground, ground, -inf if on else ground]))
-                ub.append(np.array([ground if on else inf] * 3 + [inf]))
-                before = contacts[t - 1, s] if t > 0 else (prev_contact is not None and prev_contact[s])
-                slip = 0.0 if (on and before) else inf
-                lb.append(np.full(3, -slip))
-                ub.append(np.full(3, slip))
+                if on:
+                    lb.append(np.array([ground, ground, ground, -inf]))
+                    ub.append(np.array([ground] * 3 + [inf]))
+                else:
+                    low = ground + (float(clearance[t, s]) if clearance is not None else 0.0)
+                    high = low + flat_tolerance if (flat is not None and flat[t, s]) else inf
+                    lb.append(np.full(4, low))
+                    ub.append(np.full(4, high))
+                before = bool(contacts[t - 1, s]) if t > 0 else (prev_contact is not None and bool(prev_contact[s]))
+                if on and before:
+                    slip = 0.0
+                elif has_prev and on != before:
+                    slip = transition_step
+                else:
+                    slip = inf
+                lb.append(np.array([-slip, -slip, -inf if slip > 0 else 0.0]))
+                ub.append(np.array([slip, slip, inf if slip > 0 else 0.0]))
         return np.concatenate(lb), np.concatenate(ub)
 
     def solve(
@@ -347,12 +379,18 @@ class WindowProblem:
         prev_contact: np.ndarray | None,
         vel_step: np.ndarray,
         ground: float = 0.0,
+        clearance: np.ndarray | None = None,
+        flat: np.ndarray | None = None,
+        flat_tolerance: float = 0.0,
+        transition_step: float = np.inf,
     ) -> WindowSolution:
         """Solve one window.
 
         ``x0[W, nx]`` warm start; ``targets[W, K, 3]`` (m); ``heading[W]`` (rad); ``foot_dir[W, 2, 2]``;
         ``contacts[W, 2]`` bool; ``history[2, nx]`` the two committed frames before the window (or None);
-        ``prev_contact[2]`` contact state of the frame before; ``vel_step[nj]`` max joint change per frame (rad).
+        ``prev_contact[2]`` contact state of the frame before; ``vel_step[nj]`` max joint change per frame (rad);
+        ``clearance[W, 2]``, ``flat[W, 2]``, ``flat_tolerance``, ``transition_step``: swing-foot
+        bounds, see :meth:`constraint_bounds`.
         """
         import time
 
@@ -368,7 +406,8 @@ class WindowProblem:
                 [0.0 if history is None else 1.0],
             ]
         )
-        lbg, ubg = self.constraint_bounds(contacts, None if history is None else prev_contact, vel_step, ground)
+        lbg, ubg = self.constraint_bounds(contacts, None if history is None else prev_contact, vel_step, ground,
+                                          clearance, flat, flat_tolerance, transition_step)
         lbx, ubx = self.lbx.copy(), self.ubx.copy()
         yaw_ref = np.asarray(heading, dtype=np.float64).ravel() + self.kin.nominal_x[3]
         lbx[3::nx] = yaw_ref - self.solver_config.max_yaw_offset

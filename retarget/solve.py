@@ -25,6 +25,7 @@ from retarget.config import ContactConfig, RetargetConfig
 from retarget.contacts import detect_contacts
 from retarget.problem import RobotKinematics, WindowProblem
 from retarget.robot_model import RetargetRobot
+from retarget.swing import swing_clearance, transition_frames
 from retarget.targets import HumanTargets, make_targets
 
 
@@ -145,7 +146,23 @@ class Retargeter:
         n = self.config.presolve_frames
         return n if self.config.mode == "trajectory" and 2 <= n < first_window else 0
 
-    def _presolve(self, x, known, n, first_window: int, targets: HumanTargets, kp_targets, contacts, vel_step) -> None:
+    def _swing_bounds(self, contacts: np.ndarray, fps: float) -> dict:
+        """Swing-foot keyword arguments of :meth:`WindowProblem.solve` for the whole clip."""
+        sw, L = self.config.swing, self.kin.leg_length
+        if sw.height <= 0:
+            return {"clearance": None, "flat": None, "flat_tolerance": 0.0, "transition_step": np.inf}
+        return {
+            "clearance": swing_clearance(contacts, fps, L, sw),
+            "flat": transition_frames(contacts),
+            "flat_tolerance": sw.flat_tolerance * L,
+            "transition_step": sw.transition_speed * L / fps,
+        }
+
+    @staticmethod
+    def _slice(bounds: dict, s: int, e: int) -> dict:
+        return {k: (v[s:e] if isinstance(v, np.ndarray) else v) for k, v in bounds.items()}
+
+    def _presolve(self, x, known, n, first_window: int, targets: HumanTargets, kp_targets, contacts, vel_step, swing: dict) -> None:
         """Sweep the first window in chunks of ``n`` frames (each chunk chained to the previous one
         and warm-started from it by nearest pose): a cheap, rough first pass that warm-starts the
         first full window much better than the nominal pose does."""
@@ -154,7 +171,8 @@ class Retargeter:
             x0 = self._warm_start(x, known, s, s + n, targets, kp_targets)
             history = x[s - 2 : s] if s >= 2 else None
             sol = prob.solve(x0, kp_targets[s : s + n], targets.heading[s : s + n], targets.foot_dir[s : s + n],
-                             contacts[s : s + n], history, contacts[s - 1] if s else None, vel_step, self.config.ground_height)
+                             contacts[s : s + n], history, contacts[s - 1] if s else None, vel_step, self.config.ground_height,
+                             **self._slice(swing, s, s + n))
             x[s : s + n] = sol.x
             known[s : s + n] = True
 
@@ -185,6 +203,7 @@ class Retargeter:
         kp_idx = [JOINT_NAMES.index(k.human_joint) for k in self.robot.keypoints]
         kp_targets = targets.joints[:, kp_idx, :]  # [T, K, 3]
         vel_step = self.robot.velocity_limit * cfg.velocity_margin / fps
+        swing = self._swing_bounds(contacts, fps)
 
         x = np.zeros((T, self.kin.nx))
         known = np.zeros(T, dtype=bool)  # frames with a solved value (committed or look-ahead)
@@ -195,13 +214,13 @@ class Retargeter:
         for s, e, commit in bar:
             prob = self.problem(e - s)
             if s == 0 and known.sum() == 0 and self._presolve_size(e) > 0:
-                self._presolve(x, known, self._presolve_size(e), e, targets, kp_targets, contacts, vel_step)
+                self._presolve(x, known, self._presolve_size(e), e, targets, kp_targets, contacts, vel_step, swing)
             x0 = self._warm_start(x, known, s, e, targets, kp_targets)
             history = x[s - 2 : s] if s >= 2 else (np.stack([x[0], x[0]]) if s == 1 else None)
             prev_contact = contacts[s - 1] if s >= 1 else None
             sol = prob.solve(
                 x0, kp_targets[s:e], targets.heading[s:e], targets.foot_dir[s:e], contacts[s:e],
-                history, prev_contact, vel_step, cfg.ground_height,
+                history, prev_contact, vel_step, cfg.ground_height, **self._slice(swing, s, e),
             )
             x[s:e] = sol.x
             known[s:e] = True
