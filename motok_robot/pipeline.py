@@ -59,10 +59,8 @@ from pathlib import Path
 import numpy as np
 
 from motok_robot.errors import HardwareError, InputError, MotokError
+from motok_robot.text.validate import MAX_TEXT_CHARS, check_text  # noqa: F401  (MAX_TEXT_CHARS: public here too)
 
-#: Longest prompt accepted, characters (equals ``motok_robot.text.MAX_TEXT_CHARS``; kept here so
-#: that input is checked without importing torch - a test keeps the two equal).
-MAX_TEXT_CHARS = 500
 PLAYBACK_MODES = ("dry-run", "sim", "port")
 #: Clip length used with constraints when no ``seconds`` is given (the planner's no-text default).
 DEFAULT_CONSTRAINED_SECONDS = 6.0
@@ -248,18 +246,6 @@ class PromptSpec:
 
 
 # ----------------------------------------------------------------------------- input checks
-def check_text(text) -> str:
-    """The prompt with whitespace collapsed; InputError when empty or too long."""
-    if not isinstance(text, str):
-        raise InputError(f"text must be a string, got {type(text).__name__}")
-    clean = " ".join(text.split())
-    if not clean:
-        raise InputError('text is empty: give a sentence such as "a person walks forward"')
-    if len(clean) > MAX_TEXT_CHARS:
-        raise InputError(f"text is {len(clean)} characters long; at most {MAX_TEXT_CHARS} are accepted")
-    return clean
-
-
 def check_seconds(seconds, where: str = "seconds") -> float | None:
     if seconds is None:
         return None

@@ -28,7 +28,7 @@ from motok_robot.errors import InputError
 from motok_robot.motion.skeleton import FPS
 from motok_robot.paths import models_dir
 from motok_robot.planner.config import PLANNER_KINDS, SampleConfig
-from motok_robot.text.base import MAX_TEXT_CHARS
+from motok_robot.text import validate
 
 TRAIN_HINT = {
     "tokenizer": "motok-robot train tokenizer --data DIR --out {path}",
@@ -88,14 +88,8 @@ class GeneratedMotion:
 
 
 def check_text(text: str) -> str:
-    if not isinstance(text, str):
-        raise InputError(f"text must be a string, got {type(text).__name__}")
-    clean = " ".join(text.split())
-    if not clean:
-        raise InputError("text is empty: give a sentence such as \"a person walks forward\" (or use --unconditional)")
-    if len(clean) > MAX_TEXT_CHARS:
-        raise InputError(f"text is {len(clean)} characters long; at most {MAX_TEXT_CHARS} are accepted")
-    return clean
+    """The prompt with whitespace collapsed (:func:`motok_robot.text.validate.check_text`)."""
+    return validate.check_text(text, hint=" (or use --unconditional)")
 
 
 class MotionGenerator:

@@ -11,10 +11,15 @@ Every encoder implements :class:`TextEncoder` (``encode(list[str]) -> Tensor[B, 
 
 from __future__ import annotations
 
-from motok_robot.errors import InputError
-from motok_robot.text.base import MAX_TEXT_CHARS, TextEncoder, check_texts
+from typing import TYPE_CHECKING
 
-__all__ = ["TextEncoder", "MAX_TEXT_CHARS", "check_texts", "load_text_encoder", "DEFAULT_TEXT_ENCODER"]
+from motok_robot.errors import InputError
+from motok_robot.text.validate import MAX_TEXT_CHARS, check_text, check_texts
+
+if TYPE_CHECKING:
+    from motok_robot.text.base import TextEncoder
+
+__all__ = ["TextEncoder", "MAX_TEXT_CHARS", "check_text", "check_texts", "load_text_encoder", "DEFAULT_TEXT_ENCODER"]
 
 DEFAULT_TEXT_ENCODER = "minilm"
 
@@ -48,3 +53,13 @@ def load_text_encoder(spec: str = DEFAULT_TEXT_ENCODER, device: str = "cpu", reu
     if reuse:
         _LOADED[key] = encoder
     return encoder
+
+
+def __getattr__(name: str):
+    # TextEncoder needs torch: imported on first use, so that ``import motok_robot.text``
+    # (prompt checks) stays light.
+    if name == "TextEncoder":
+        from motok_robot.text.base import TextEncoder
+
+        return TextEncoder
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

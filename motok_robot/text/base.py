@@ -13,29 +13,9 @@ from collections.abc import Sequence
 
 import torch
 
-from motok_robot.errors import InputError
+from motok_robot.text.validate import MAX_TEXT_CHARS, check_texts
 
-#: longest prompt accepted, in characters (longer text is an input error, never truncated silently)
-MAX_TEXT_CHARS = 500
-
-
-def check_texts(texts: Sequence[str]) -> list[str]:
-    """Validate prompts: a list of non-empty strings of at most :data:`MAX_TEXT_CHARS` characters."""
-    if isinstance(texts, str):
-        raise InputError("texts must be a list of strings, got a single string (wrap it in a list)")
-    out = []
-    for i, text in enumerate(texts):
-        if not isinstance(text, str):
-            raise InputError(f"text #{i} is a {type(text).__name__}, expected a string")
-        stripped = " ".join(text.split())
-        if not stripped:
-            raise InputError(f"text #{i} is empty: give a sentence such as 'a person walks forward'")
-        if len(stripped) > MAX_TEXT_CHARS:
-            raise InputError(
-                f"text #{i} is {len(stripped)} characters long; at most {MAX_TEXT_CHARS} are accepted"
-            )
-        out.append(stripped)
-    return out
+__all__ = ["MAX_TEXT_CHARS", "TextEncoder", "check_texts"]
 
 
 class TextEncoder(ABC):
