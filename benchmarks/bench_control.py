@@ -5,7 +5,8 @@ Run: python benchmarks/bench_control.py [--tokenizer RUN] [--threads 1] [--repea
 
 Decodes the same tokens with a dense root trajectory (every frame) and, separately, five sparse
 keyframes, under no control and under each decoder mechanism (MoTok refinement, GMD,
-MDM inpainting, and refinement + physics terms), with the default :class:`ControlConfig`, and
+MDM inpainting, the default GMD + refinement, with and without the physics terms), with the
+default :class:`ControlConfig` settings, and
 reports the median of ``--repeat`` runs after one warm-up. Without ``--tokenizer`` the
 tokenizer has the default size and random weights (decoding time depends on the architecture
 and the number of steps, not on the weights). Prints a table and writes JSON with a machine
@@ -30,7 +31,8 @@ SETTINGS = (
     ("motok", ("motok",), False),
     ("gmd", ("gmd",), False),
     ("inpaint", ("inpaint",), False),
-    ("motok + foot physics", ("motok",), True),
+    ("gmd+motok (default)", ("gmd", "motok"), False),
+    ("gmd+motok + foot physics", ("gmd", "motok"), True),
 )
 
 

@@ -137,3 +137,36 @@ def test_bone_term_is_zero_for_a_rigid_skeleton_and_pulls_a_stretched_limb_back(
     loss.sum().backward()
     assert float(loss.detach()[0]) > 1e-4
     assert float(stretched.grad[0, 25, 21, 2]) < 0  # descent moves the wrist back up
+
+
+def test_seams_are_cross_faded_and_kept_frames_exact():
+    from motok_robot.control.decode import blend_seams
+
+    T, P, S = 40, 8, 8
+    x = torch.zeros(1, T, 263)
+    x[:, :P, 4:] = 1.0  # kept prefix pose
+    x[:, T - S :, 4:] = -1.0  # kept suffix pose; the generated middle is 0
+    out = blend_seams(x, P, S, frames=10)
+    torch.testing.assert_close(out[:, :P], x[:, :P])
+    torch.testing.assert_close(out[:, T - S :], x[:, T - S :])
+    pose = out[0, :, 10]
+    steps = (pose[1:] - pose[:-1]).abs()
+    assert steps.max() <= 1.0 / 11 + 1e-6  # a jump of 1 spread over 11 steps, not one
+    torch.testing.assert_close(out[:, :, :3], x[:, :, :3])  # the root path is not touched
+
+
+def test_sparse_root_imputation_is_exact_without_jumps(walk):
+    from motok_robot.control.guidance import impute_root
+    from motok_robot.control.losses import ConstraintTensors
+    from motok_robot.motion.features import features_from_joints
+    from motok_robot.motion.features_torch import root_from_features
+
+    x = torch.as_tensor(features_from_joints(walk), dtype=torch.float32)[None]  # [1, T-1, 263]
+    root, _ = root_from_features(x)
+    c = Constraints(x.shape[1])
+    c.set_joint(10, 0, (root[0, 10, :2] + torch.tensor([0.0, 1.0])).tolist())  # one metre to the left
+    c.set_joint(20, 0, root[0, 20, :2].tolist())
+    out, _ = root_from_features(impute_root(x, ConstraintTensors.from_constraints(c)))
+    torch.testing.assert_close(out[0, [10, 20], :2], torch.as_tensor(c.joint_targets[[10, 20], 0, :2]), atol=1e-5, rtol=0)
+    extra = (out - root)[0, :, 1]  # the detour, spread linearly over the free frames
+    assert (extra[1:] - extra[:-1]).abs().max() <= 1.0 / 10 + 1e-5

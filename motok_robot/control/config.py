@@ -35,6 +35,8 @@ class ControlConfig:
     bone_weight: float = 10.0
     #: make prefix / suffix frames exact after sampling (in-betweening)
     exact_seams: bool = True
+    #: free frames next to a seam whose pose is cross-faded from the kept frames (0 = none)
+    seam_blend_frames: int = 10
 
     def __post_init__(self) -> None:
         from motok_robot.errors import InputError

@@ -16,10 +16,41 @@ from motok_robot.control.guidance import make_guidance, overwrite_known, with_ro
 from motok_robot.motion.features_torch import joints_from_features, root_from_features
 
 
-def exact_seams(features: torch.Tensor, constraints: Constraints) -> torch.Tensor:
+#: features describing the pose relative to the root (height, ric, rotations, velocities, contacts)
+POSE_DIMS = slice(3, 263)
+
+
+def blend_seams(x: torch.Tensor, prefix: int, suffix: int, frames: int) -> torch.Tensor:
+    """Cross-fade the pose of the free frames next to a seam from the kept frame's pose.
+
+    ``x [B, T, 263]`` raw features whose first ``prefix`` and last ``suffix`` frames are kept. The
+    free frame at distance ``d`` (1 .. ``frames``) from a seam gets ``(1 - d / (frames + 1))`` of
+    the kept frame's pose (:data:`POSE_DIMS`; the root path is handled separately), so the pose
+    does not jump where the kept frames meet the generated ones.
+    """
+    T = x.shape[1]
+    free = T - prefix - suffix
+    if frames < 1 or free < 1:
+        return x
+    x = x.clone()
+    n = min(frames, free)
+    weight = 1.0 - torch.arange(1, n + 1, device=x.device, dtype=x.dtype) / (frames + 1)  # [n], kept pose share
+    if prefix > 0:
+        sl = slice(prefix, prefix + n)
+        x[:, sl, POSE_DIMS] = weight[:, None] * x[:, prefix - 1 : prefix, POSE_DIMS] + (1 - weight[:, None]) * x[:, sl, POSE_DIMS]
+    if suffix > 0:
+        start = T - suffix
+        sl = slice(start - n, start)
+        w = weight.flip(0)[:, None]
+        x[:, sl, POSE_DIMS] = w * x[:, start : start + 1, POSE_DIMS] + (1 - w) * x[:, sl, POSE_DIMS]
+    return x
+
+
+def exact_seams(features: torch.Tensor, constraints: Constraints, blend: int = 10) -> torch.Tensor:
     """Copy prefix / suffix features in and move the suffix to its target place and heading.
 
-    ``features [B, T, 263]`` raw. The suffix target is where the given suffix joints are
+    ``features [B, T, 263]`` raw. The pose of the ``blend`` free frames next to each seam is
+    cross-faded from the kept frames (:func:`blend_seams`). The suffix target is where the given suffix joints are
     (``constraints.joint_targets``): the heading residual at the first suffix frame is spread
     over the root angular velocity of the free frames, then the root position residual as a
     linear ramp over the same frames.
@@ -31,6 +62,7 @@ def exact_seams(features: torch.Tensor, constraints: Constraints) -> torch.Tenso
     prefix = None if c.prefix_features is None else torch.as_tensor(c.prefix_features, device=device, dtype=dtype)
     suffix = None if c.suffix_features is None else torch.as_tensor(c.suffix_features, device=device, dtype=dtype)
     x = overwrite_known(features, prefix, suffix, None)
+    x = blend_seams(x, 0 if prefix is None else len(prefix), 0 if suffix is None else len(suffix), blend)
     if suffix is None:
         return x
     T = x.shape[1]
@@ -81,5 +113,5 @@ def decode_with_control(
     guidance = make_guidance(constraints, config, device=tokenizer.device)
     features = tokenizer.decode(tokens, length=length, steps=steps, seed=seed, guidance=guidance)
     if config.exact_seams and "none" not in config.mechanisms:
-        features = exact_seams(features, constraints)
+        features = exact_seams(features, constraints, config.seam_blend_frames)
     return features

@@ -63,13 +63,45 @@ def with_root(features: torch.Tensor, root: torch.Tensor, yaw: torch.Tensor) -> 
     return out
 
 
+def interpolate_known(values: torch.Tensor, known: torch.Tensor) -> torch.Tensor:
+    """``values [B, T]`` given where ``known [T]`` (bool) is true, linearly interpolated in between
+    and held constant before the first / after the last known frame; zeros when none is known."""
+    T = values.shape[-1]
+    idx = torch.nonzero(known).squeeze(-1)
+    if idx.numel() == 0:
+        return torch.zeros_like(values)
+    t = torch.arange(T, device=values.device)
+    pos = torch.searchsorted(idx, t)
+    hi = idx[pos.clamp(max=idx.numel() - 1)]
+    lo = idx[(pos - 1).clamp(min=0)]
+    lo = torch.where(pos == 0, hi, lo)
+    a = ((t - lo).to(values.dtype) / (hi - lo).clamp(min=1).to(values.dtype)).clamp(0.0, 1.0)
+    return values[..., lo] + (values[..., hi] - values[..., lo]) * a
+
+
 def impute_root(features: torch.Tensor, ct: ConstraintTensors) -> torch.Tensor:
-    """Put the constrained root positions of ``ct`` into raw ``features [B, T, 263]``."""
+    """Put the constrained root positions of ``ct`` into raw ``features [B, T, 263]``.
+
+    The residual (target - current root) at the constrained frames is interpolated linearly
+    over the free frames and added to the whole path, so constrained frames are met exactly and
+    sparse waypoints do not leave jumps next to them. Frame 0's ground position is the origin
+    by construction of the features, so its planar residual is 0.
+    """
     root, yaw = root_from_features(features)
-    w = ct.weight[:, 0, :]  # [T, 3]
+    w = ct.weight[:, 0, :] > 0  # [T, 3]
     if not bool(w.any()):
         return features
-    new_root = root * (1 - w) + ct.targets[:, 0, :] * w
+    residual = (ct.targets[:, 0, :] - root) * w  # [B, T, 3]
+    new_root = root.clone()
+    for d in range(3):
+        known = w[:, d].clone()
+        values = residual[..., d]
+        if d < 2:  # planar: frame 0 stays at the origin
+            known[0] = True
+            values = values.clone()
+            values[:, 0] = 0.0
+        if bool(w[:, d].any()):
+            new_root[..., d] = root[..., d] + interpolate_known(values, known)
     return with_root(features, new_root, yaw)
 
 
