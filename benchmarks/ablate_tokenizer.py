@@ -17,16 +17,18 @@ a machine description.  This is a long job: run it on the full data when the CPU
 from __future__ import annotations
 
 import argparse
-import json
-import re
+import sys
 import time
 from pathlib import Path
 
 import torch
 
-from motok_robot.tokenizer import TokenizerConfig, TrainConfig, load_tokenizer
-from motok_robot.tokenizer.evaluate import machine_description, reconstruct_dataset
-from motok_robot.tokenizer.train import dataset_statistics, load_split, train_tokenizer
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import machine_description, machine_summary, print_table, write_json  # noqa: E402
+
+from motok_robot.tokenizer import TokenizerConfig, TrainConfig, load_tokenizer  # noqa: E402
+from motok_robot.tokenizer.evaluate import reconstruct_dataset  # noqa: E402
+from motok_robot.tokenizer.train import dataset_statistics, load_split, train_tokenizer  # noqa: E402
 
 SIZES = {
     "small": {"width": 128, "code_dim": 128, "denoiser_width": 128, "denoiser_blocks": 6},
@@ -48,18 +50,18 @@ EXTRAS = {
     "diffusion_ds4_k3_emphasis": {"emphasis": True},
     "diffusion_ds4_k3_geometric": {"joint_weight": 100.0, "velocity_weight": 100.0, "foot_weight": 100.0},  # m^2 units
 }
-COLUMNS = (
-    ("name", "config", "{:<28}"),
-    ("token_rate_hz", "tok/s", "{:>6.1f}"),
-    ("mpjpe_cm", "MPJPE cm", "{:>9.2f}"),
-    ("mpjpe_root_aligned_cm", "aligned cm", "{:>10.2f}"),
-    ("root_trajectory_error_cm", "root cm", "{:>8.2f}"),
-    ("foot_skating_ratio_reconstructed", "skate", "{:>6.3f}"),
-    ("foot_skating_ratio_original", "skate GT", "{:>8.3f}"),
-    ("codebook_usage", "usage", "{:>6.2f}"),
-    ("perplexity", "ppl", "{:>7.1f}"),
-    ("train_minutes", "train min", "{:>9.1f}"),
-)
+COLUMNS = {  # result key -> table header
+    "name": "config",
+    "token_rate_hz": "tok/s",
+    "mpjpe_cm": "MPJPE cm",
+    "mpjpe_root_aligned_cm": "aligned cm",
+    "root_trajectory_error_cm": "root cm",
+    "foot_skating_ratio_reconstructed": "skate",
+    "foot_skating_ratio_original": "skate GT",
+    "codebook_usage": "usage",
+    "perplexity": "ppl",
+    "train_minutes": "train min",
+}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -109,10 +111,9 @@ def main(argv: list[str] | None = None) -> int:
         metrics.pop("machine", None)
         results.append({"name": name, "overrides": overrides, "train_minutes": minutes, **metrics})
 
-    header = " ".join(re.sub(r"\.\d+f", "", fmt) for _, _, fmt in COLUMNS)
-    print(header.format(*[title for _, title, _ in COLUMNS]))
-    for r in results:
-        print(" ".join(fmt.format(r[key]) for key, _, fmt in COLUMNS))
+    machine = machine_description(args.threads or torch.get_num_threads())
+    print(machine_summary(machine))
+    print_table(results, list(COLUMNS), headers=COLUMNS)
     out = {
         "benchmark": "tokenizer ablation",
         "data": str(args.data),
@@ -121,10 +122,9 @@ def main(argv: list[str] | None = None) -> int:
         "batch_size": args.batch_size,
         "size": args.size,
         "results": results,
-        "machine": machine_description(),
+        "machine": machine,
     }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(out, indent=2) + "\n")
+    write_json(args.json, out)
     print(f"wrote {args.json}")
     return 0
 

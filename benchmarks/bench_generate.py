@@ -14,61 +14,17 @@ are available.  Prints a table and writes JSON with a machine description.
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import statistics
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import machine_description, machine_summary, print_table, random_model_runs, time_median, write_json  # noqa: E402
+
 SECONDS = (2.0, 6.0, 10.0)
 STAGES = ("text", "plan", "decode", "joints")
-
-
-def _random_runs(kind: str, root: Path) -> tuple[Path, Path]:
-    """Write default-size tokenizer and planner runs with random weights into ``root``."""
-    import torch
-
-    from motok_robot.planner.checkpoint import build_planner, save_planner_weights, write_run_config
-    from motok_robot.planner.config import PlannerConfig
-    from motok_robot.planner.data import file_digest
-    from motok_robot.tokenizer import MoTok, TokenizerConfig, save_tokenizer
-
-    torch.manual_seed(0)
-    tok = MoTok(TokenizerConfig())
-    save_tokenizer(tok, root / "tokenizer")
-    cfg = PlannerConfig(kind=kind, codebook_size=tok.config.codebook_size, downsample=tok.frames_per_token)
-    planner = build_planner(cfg)
-    write_run_config(root / "planner", cfg, {"tokenizer": {"sha256": file_digest(root / "tokenizer" / "model.safetensors")}})
-    save_planner_weights(planner, root / "planner")
-    return root / "tokenizer", root / "planner"
-
-
-def _machine(threads: int) -> dict:
-    import torch
-
-    info = {
-        "platform": platform.platform(),
-        "processor": platform.processor() or platform.machine(),
-        "python": platform.python_version(),
-        "torch": torch.__version__,
-        "cpu_count": os.cpu_count(),
-        "torch_threads": threads,
-    }
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                info["cpu_model"] = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    try:
-        info["load_average"] = os.getloadavg()
-    except OSError:
-        pass
-    return info
 
 
 def main() -> int:
@@ -92,7 +48,7 @@ def main() -> int:
     tok_run, plan_run = args.tokenizer, args.planner_run
     if args.random_init:
         tmp = tempfile.TemporaryDirectory()
-        tok_run, plan_run = _random_runs(args.planner, Path(tmp.name))
+        tok_run, plan_run = random_model_runs(args.planner, Path(tmp.name))
     t_load = time.perf_counter()
     gen = MotionGenerator(args.planner, tok_run, plan_run, device=args.device)
     load_s = time.perf_counter() - t_load
@@ -100,22 +56,27 @@ def main() -> int:
     gen.generate(prompt, seconds=2.0, seed=0)  # warm-up
     rows = []
     for seconds in SECONDS:
-        samples = {s: [] for s in STAGES + ("total",)}
-        for rep in range(args.repeat):
-            gen.text_encoder.clear_cache()
-            start = time.perf_counter()
-            motion = gen.generate(prompt, seconds=seconds, seed=rep)
-            samples["total"].append(time.perf_counter() - start)
+        samples = {s: [] for s in STAGES}
+        seeds = iter(range(args.repeat))
+        box = {}
+
+        def run(seconds=seconds, samples=samples, seeds=seeds, box=box):
+            gen.text_encoder.clear_cache()  # so that text encoding is really measured
+            box["motion"] = motion = gen.generate(prompt, seconds=seconds, seed=next(seeds))
             for s in STAGES:
                 samples[s].append(motion.timings[s])
+
+        total = time_median(run, repeat=args.repeat, warmup=0)
+        motion = box["motion"]
         rows.append({"seconds": seconds, "frames": int(motion.joints.shape[0]), "tokens": int(len(motion.tokens)),
-                     **{f"{s}_ms": 1000 * statistics.median(v) for s, v in samples.items()}})
-    header = f"{'clip':>6} {'tokens':>6} " + " ".join(f"{s + ' ms':>10}" for s in STAGES + ("total",))
+                     **{f"{s}_ms": 1000 * statistics.median(v) for s, v in samples.items()},
+                     "total_ms": 1000 * total["median_s"], "total_cpu_ms": 1000 * total["cpu_median_s"]})
+    machine = machine_description(args.threads)
     print(f"planner={args.planner}  model={gen.model_id}  threads={args.threads}  median of {args.repeat}"
           + ("  (random-init weights)" if args.random_init else ""))
-    print(header)
-    for r in rows:
-        print(f"{r['seconds']:>5.0f}s {r['tokens']:>6} " + " ".join(f"{r[s + '_ms']:>10.1f}" for s in STAGES + ("total",)))
+    print(machine_summary(machine))
+    print_table(rows, ["seconds", "tokens", *(f"{s}_ms" for s in STAGES), "total_ms", "total_cpu_ms"],
+                headers={"seconds": "clip s"}, digits=1)
     result = {
         "benchmark": "bench_generate",
         "planner": args.planner,
@@ -127,11 +88,9 @@ def main() -> int:
         "sampling": {"cfg_scale": 2.5, "planner_steps": 10,
                      "decoder_steps": gen.tokenizer.config.sample_steps},
         "rows": rows,
-        "machine": _machine(args.threads),
-        "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "machine": machine,
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    write_json(args.out, result)
     print(f"written {args.out}")
     if tmp is not None:
         tmp.cleanup()

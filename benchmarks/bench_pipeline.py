@@ -40,28 +40,12 @@ from pathlib import Path
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import RESULTS_DIR, machine_description, machine_summary, markdown_table, time_median, write_json  # noqa: E402
+from common import (  # noqa: E402
+    RESULTS_DIR, machine_description, machine_summary, markdown_table, random_model_runs, time_median, write_json,
+)
 
 PROMPT = "a person walks forward and waves the right hand"
 TARGET_S = {"generate": 1.0, "retarget": 1.0, "validate": 1.0}
-
-
-def _random_runs(kind: str, root: Path) -> tuple[Path, Path]:
-    """Default-size tokenizer and planner runs with random weights, written into ``root``."""
-    import torch
-
-    from motok_robot.planner.checkpoint import build_planner, save_planner_weights, write_run_config
-    from motok_robot.planner.config import PlannerConfig
-    from motok_robot.planner.data import file_digest
-    from motok_robot.tokenizer import MoTok, TokenizerConfig, save_tokenizer
-
-    torch.manual_seed(0)
-    tok = MoTok(TokenizerConfig())
-    save_tokenizer(tok, root / "tokenizer")
-    cfg = PlannerConfig(kind=kind, codebook_size=tok.config.codebook_size, downsample=tok.frames_per_token)
-    write_run_config(root / "planner", cfg, {"tokenizer": {"sha256": file_digest(root / "tokenizer" / "model.safetensors")}})
-    save_planner_weights(build_planner(cfg), root / "planner")
-    return root / "tokenizer", root / "planner"
 
 
 def _have_trained(kind: str) -> bool:
@@ -118,7 +102,7 @@ def main() -> int:
     tok_run, plan_run = args.tokenizer, args.planner_run
     if args.random_init:
         tmp = tempfile.TemporaryDirectory()
-        tok_run, plan_run = _random_runs(args.planner, Path(tmp.name))
+        tok_run, plan_run = random_model_runs(args.planner, Path(tmp.name))
     trained = args.random_init is False and (plan_run is not None or _have_trained(args.planner))
     if args.random_init or trained:
         from motok_robot.planner.generate import MotionGenerator

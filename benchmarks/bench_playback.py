@@ -18,14 +18,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import machine_description, machine_summary, print_table, write_json  # noqa: E402
 
 from motok_robot.errors import HardwareError
 from motok_robot.servo.config import PlaybackConfig
@@ -34,35 +35,6 @@ from motok_robot.servo.playback_log import read_log
 from motok_robot.servo.streamer import Streamer
 from motok_robot.servo.testing import emulated_bus, sine_trajectory, synthetic_specs
 from motok_robot.servo.timing import RealClock, realtime_priority
-
-
-def machine() -> dict:
-    info = {
-        "platform": platform.platform(),
-        "python": sys.version.split()[0],
-        "processor": platform.processor() or platform.machine(),
-        "cpu_count": os.cpu_count(),
-        "numpy": np.__version__,
-    }
-    try:
-        info["load_average_1_5_15"] = os.getloadavg()
-    except OSError:
-        pass
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                info["cpu_model"] = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    try:
-        import dynamixel_sdk  # noqa: F401
-        from importlib.metadata import version
-
-        info["dynamixel_sdk"] = version("dynamixel-sdk")
-    except Exception:
-        pass
-    return info
 
 
 def servo_map() -> tuple[ServoMap, str]:
@@ -160,12 +132,10 @@ def main(argv: list[str] | None = None) -> int:
             "overruns", "goal_mismatches"]
     print(f"playback benchmark: {args.seconds:g} s clip (+{args.ramp:g} s ramp), {smap.n} emulated servos "
           f"({robot}), {args.rate:g} Hz, spin {args.spin_ms:g} ms, scheduler {fifo}")
-    print(f"{'run':>4} " + " ".join(f"{k:>15}" for k in keys))
     for i, r in enumerate(runs):
         if r["stopped"]:
-            print(f"{i:>4} STOPPED: {r['stopped']}")
-            continue
-        print(f"{i:>4} " + " ".join(f"{r[k]:>15.3f}" if isinstance(r[k], float) else f"{r[k]:>15d}" for k in keys))
+            print(f"run {i} STOPPED: {r['stopped']}")
+    print_table([{"run": i, **r} for i, r in enumerate(runs) if not r["stopped"]], ["run", *keys])
     done = [r for r in runs if not r["stopped"]]
     if done:
         print(f"goals checked per run: {done[0]['goals_checked']} (trajectory phase, all servos)")
@@ -179,16 +149,15 @@ def main(argv: list[str] | None = None) -> int:
         "spin_ms": args.spin_ms,
         "scheduler": fifo,
         "runs": runs,
-        "machine": machine(),
+        "machine": machine_description(),
         "acceptance": {
             "runs_completed": len(done),
             "all_goals_exact": bool(done) and all(r["goal_mismatches"] == 0 and r["rejected_goals"] == 0 for r in done),
             "jitter_p99_ms_le_2": bool(done) and len(done) == len(runs) and all(r["jitter_p99_ms"] <= 2.0 for r in done),
         },
     }
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(summary, indent=2) + "\n")
+    print(machine_summary(summary["machine"]))
+    out = write_json(args.out, summary)
     print(f"wrote {out}")
     return 0
 

@@ -13,29 +13,22 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
-import time
+import sys
 from pathlib import Path
 
 import torch
 
-from motok_robot.tokenizer import MoTok, TokenizerConfig, load_tokenizer
-from motok_robot.tokenizer.evaluate import machine_description
-from motok_robot.tokenizer.model import parameter_count
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import machine_description, machine_summary, print_table, time_median, write_json  # noqa: E402
+
+from motok_robot.tokenizer import MoTok, TokenizerConfig, load_tokenizer  # noqa: E402
+from motok_robot.tokenizer.model import parameter_count  # noqa: E402
 
 
 def _time(fn, repeats: int, device: torch.device) -> float:
-    fn()  # warm-up
-    times = []
-    for _ in range(repeats):
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        start = time.perf_counter()
-        fn()
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
+    """Median wall time (s) of ``repeats`` calls after one warm-up (CUDA synchronised)."""
+    sync = torch.cuda.synchronize if device.type == "cuda" else None
+    return time_median(fn, repeat=repeats, warmup=1, sync=sync)["median_s"]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -82,11 +75,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"tokenizer: {what}; decoder {cfg.decoder}, downsample {cfg.downsample}, "
           f"params {parameter_count(tok) / 1e6:.2f} M (denoiser {parameter_count(tok.denoiser) / 1e6 if tok.denoiser else 0:.2f} M); "
           f"clip {clip_seconds:.1f} s = {frames} frames = {tokens.shape[1]} tokens, batch {args.batch}, device {device}")
-    print(f"{'threads':>7} {'what':>7} {'steps':>5} {'ms':>9} {'x realtime':>10}")
     for r in rows:
         r["ms"] = 1000 * r["seconds"]
         r["realtime_factor"] = args.batch * clip_seconds / r["seconds"]
-        print(f"{r['threads']:>7} {r['what']:>7} {r['steps']:>5} {r['ms']:>9.1f} {r['realtime_factor']:>10.1f}")
+    machine = machine_description(torch.get_num_threads())
+    print(machine_summary(machine))
+    print_table(rows, ["threads", "what", "steps", "ms", "realtime_factor"], headers={"realtime_factor": "x realtime"})
     out = {
         "benchmark": "tokenizer encode/decode",
         "clip_seconds": clip_seconds,
@@ -98,10 +92,9 @@ def main(argv: list[str] | None = None) -> int:
                    "denoiser_blocks": cfg.denoiser_blocks, "width": cfg.width},
         "parameters": parameter_count(tok),
         "rows": rows,
-        "machine": machine_description(),
+        "machine": machine,
     }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(out, indent=2) + "\n")
+    write_json(args.json, out)
     print(f"wrote {args.json}")
     return 0
 

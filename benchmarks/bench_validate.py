@@ -17,10 +17,7 @@ would take); the load average is recorded with the numbers.
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
-import statistics
 import sys
 import tempfile
 import time
@@ -29,8 +26,10 @@ from pathlib import Path
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import machine_description, machine_summary, print_table, time_median, write_json  # noqa: E402
 
 from motok_robot.robots import list_robots, load  # noqa: E402
 from motok_robot.sim import synthetic  # noqa: E402
@@ -45,20 +44,6 @@ CLIP_S = 10.0
 FPS = 20.0
 
 
-def machine() -> dict:
-    cpu = ""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return {"cpu": cpu, "cores": os.cpu_count(), "load_average_1m": os.getloadavg()[0],
-            "python": platform.python_version(), "mujoco": mujoco.__version__, "platform": platform.platform(),
-            "mujoco_gl": os.environ.get("MUJOCO_GL"), "omp_num_threads": os.environ.get("OMP_NUM_THREADS")}
-
-
 def ten_second_walk(index) -> np.ndarray:
     qpos = synthetic.walk(index, steps=2, step_period_s=CLIP_S / 3, fps=FPS)
     frames = int(CLIP_S * FPS) + 1
@@ -66,14 +51,15 @@ def ten_second_walk(index) -> np.ndarray:
 
 
 def timed(fn, repeat: int) -> tuple[float, float, object]:
-    """Median wall time, median CPU time of this process (s), and the last result."""
-    walls, cpus, out = [], [], None
-    for _ in range(repeat):
-        start, cpu = time.perf_counter(), time.process_time()
-        out = fn()
-        walls.append(time.perf_counter() - start)
-        cpus.append(time.process_time() - cpu)
-    return statistics.median(walls), statistics.median(cpus), out
+    """Median wall time, median CPU time of this process (s) of ``repeat`` runs (no warm-up),
+    and the last result."""
+    box = {}
+
+    def run():
+        box["out"] = fn()
+
+    t = time_median(run, repeat=repeat, warmup=0)
+    return t["median_s"], t["cpu_median_s"], box["out"]
 
 
 def bench_robot(name: str, repeat: int, render: bool) -> dict:
@@ -116,21 +102,17 @@ def main(argv=None) -> int:
     parser.add_argument("--json", default=str(Path(__file__).parent / "results" / "bench_validate.json"))
     args = parser.parse_args(argv)
     robots = list_robots() if args.robot == "all" else [args.robot]
-    info = machine()
+    info = machine_description()
+    info["mujoco_gl"] = os.environ.get("MUJOCO_GL")
     rows = [bench_robot(name, args.repeat, not args.no_render) for name in robots]
     info["load_average_1m_end"] = os.getloadavg()[0]
-    header = (f"{'robot':<12}{'kin s':>8}{'phys s':>8}{'sum RTF':>9}{'CPU RTF':>9}{'validate s':>12}{'RTF':>6}"
-              f"{'render s':>10}{'(CPU s)':>9}{'fell':>6}")
-    print(f"10 s clip ({int(CLIP_S * FPS) + 1} frames), median of {args.repeat}; cpu {info['cpu']} x{info['cores']}, "
-          f"load {info['load_average_1m']:.1f}")
-    print(header)
-    for r in rows:
-        print(f"{r['robot']:<12}{r['kinematic_s']:>8.3f}{r['physics_s']:>8.3f}{r['kinematic_plus_physics_rtf']:>9.1f}"
-              f"{r['kinematic_plus_physics_cpu_rtf']:>9.1f}{r['validate_no_render_s']:>12.3f}{r['validate_no_render_rtf']:>6.1f}"
-              f"{r.get('render_s', float('nan')):>10.2f}{r.get('render_cpu_s', float('nan')):>9.2f}{str(r['fell']):>6}")
-    path = Path(args.json)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({"benchmark": "bench_validate", "machine": info, "results": rows}, indent=2) + "\n")
+    print(f"10 s clip ({int(CLIP_S * FPS) + 1} frames), median of {args.repeat}; {machine_summary(info)}")
+    print_table(rows, ["robot", "kinematic_s", "physics_s", "kinematic_plus_physics_rtf", "kinematic_plus_physics_cpu_rtf",
+                       "validate_no_render_s", "validate_no_render_rtf", "render_s", "render_cpu_s", "fell"],
+                headers={"kinematic_s": "kin s", "physics_s": "phys s", "kinematic_plus_physics_rtf": "sum RTF",
+                         "kinematic_plus_physics_cpu_rtf": "CPU RTF", "validate_no_render_s": "validate s",
+                         "validate_no_render_rtf": "RTF", "render_s": "render s", "render_cpu_s": "(CPU s)"})
+    path = write_json(args.json, {"benchmark": "bench_validate", "machine": info, "results": rows})
     print(f"wrote {path}")
     return 0
 

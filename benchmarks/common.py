@@ -6,7 +6,9 @@
 * :class:`PeakMemory` / :func:`measure_peak_memory`: peak resident memory while a block runs
   (RSS sampled by a thread, which also sees torch's CPU allocations), optionally the Python heap
   peak (``tracemalloc``) and the CUDA peak (``torch.cuda.max_memory_allocated``);
-* :func:`write_json` (adds the machine description) and :func:`markdown_table`.
+* :func:`write_json` (adds the machine description) and :func:`markdown_table`;
+* :func:`random_model_runs`: default-size tokenizer + planner runs with random weights, for
+  timing generation when no trained models exist (latency depends on sizes, not weights).
 
 Used as ``from common import ...`` by a script run as ``python benchmarks/NAME.py`` (Python
 puts the script's folder first on ``sys.path``), or ``from benchmarks.common import ...``.
@@ -228,6 +230,27 @@ def measure_peak_memory(fn: Callable[[], Any], python_heap: bool = False) -> tup
     with PeakMemory(python_heap=python_heap) as mem:
         out = fn()
     return out, mem.to_dict()
+
+
+# -- models -----------------------------------------------------------------------------------------
+def random_model_runs(kind: str, root: Path) -> tuple[Path, Path]:
+    """Write default-size tokenizer and ``kind`` planner runs with random weights (seed 0) into
+    ``root/tokenizer`` and ``root/planner``; returns those two run directories. Imports torch."""
+    import torch
+
+    from motok_robot.planner.checkpoint import build_planner, save_planner_weights, write_run_config
+    from motok_robot.planner.config import PlannerConfig
+    from motok_robot.planner.data import file_digest
+    from motok_robot.tokenizer import MoTok, TokenizerConfig, save_tokenizer
+
+    torch.manual_seed(0)
+    tok = MoTok(TokenizerConfig())
+    save_tokenizer(tok, root / "tokenizer")
+    cfg = PlannerConfig(kind=kind, codebook_size=tok.config.codebook_size, downsample=tok.frames_per_token)
+    planner = build_planner(cfg)
+    write_run_config(root / "planner", cfg, {"tokenizer": {"sha256": file_digest(root / "tokenizer" / "model.safetensors")}})
+    save_planner_weights(planner, root / "planner")
+    return root / "tokenizer", root / "planner"
 
 
 # -- output -----------------------------------------------------------------------------------------

@@ -1,35 +1,32 @@
 """Speed of the motion representation: features, decoders, stick-figure rendering.
 
-Run: python benchmarks/motion_features.py [--out benchmarks/results/motion_features.json]
-Prints a table and writes JSON with a machine description. Uses one CPU thread.
+Run: python benchmarks/motion_features.py [--repeat 5] [--out benchmarks/results/motion_features.json]
+Prints a table of median times (``--repeat`` runs after one warm-up; the renders once) and
+writes JSON with a machine description. Uses one CPU thread.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
+import sys
 import tempfile
-import time
 from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import machine_description, machine_summary, print_table, time_median, write_json  # noqa: E402
+
 from motok_robot.motion import features as F  # noqa: E402
 from motok_robot.motion import synthetic  # noqa: E402
 
 
 def _time(fn, repeat: int) -> float:
-    fn()  # warm up
-    best = float("inf")
-    for _ in range(repeat):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return best
+    """Median wall time (s) of ``repeat`` calls after one warm-up."""
+    return time_median(fn, repeat=repeat, warmup=1)["median_s"]
 
 
 def main() -> None:
@@ -72,15 +69,12 @@ def main() -> None:
         t = _time(lambda: render.render_stick_figure(clip, Path(tmp) / "a.gif"), 1)
         rows.append(("render_stick_figure gif", "40 frames, 1 panel", t * 1000, 40 / t))
 
-    print(f"{'operation':<36}{'input':<20}{'ms (best)':>12}{'frames/s':>14}")
-    for name, what, ms, fps in rows:
-        print(f"{name:<36}{what:<20}{ms:>12.2f}{fps:>14.0f}")
-    machine = {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-               "python": platform.python_version(), "numpy": np.__version__, "cpu_count": os.cpu_count(),
-               "threads": os.environ.get("OMP_NUM_THREADS")}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"machine": machine, "results": [
-        {"operation": n, "input": w, "ms_best": ms, "frames_per_s": f} for n, w, ms, f in rows]}, indent=1))
+    results = [{"operation": n, "input": w, "ms_median": ms, "frames_per_s": f} for n, w, ms, f in rows]
+    machine = machine_description(threads=1)
+    print(machine_summary(machine))
+    print_table(results, headers={"ms_median": "ms (median)", "frames_per_s": "frames/s"})
+    write_json(args.out, {"benchmark": "motion_features", "statistic": "median", "repeat": args.repeat,
+                          "machine": machine, "results": results})
     print(f"wrote {args.out}")
 
 

@@ -19,14 +19,14 @@ writes JSON with a machine description.
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import machine_description, write_json  # noqa: E402
 
 KEYS = ("decode_mm", "normalise_mm", "recompute_mm")
 
@@ -79,18 +79,10 @@ def main(argv: list[str] | None = None) -> int:
     over = table["all"]["over_tolerance"]
     print(f"{len(per_clip)} clips, {frames} frames in {wall:.1f} s; {len(over)} above {args.tolerance_mm} mm")
 
-    machine = {
-        "platform": platform.platform(),
-        "processor": platform.processor() or platform.machine(),
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "cpu_count": os.cpu_count(),
-    }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({
+    write_json(args.out, {
         "dataset": str(args.dataset), "tolerance_mm": args.tolerance_mm, "wall_s": round(wall, 2), "frames": frames,
-        "machine": machine, "by_source": table, "clips": per_clip,
-    }, indent=1))
+        "machine": machine_description(), "by_source": table, "clips": per_clip,
+    })
     print(f"wrote {args.out}")
     return 1 if over else 0
 
