@@ -38,6 +38,7 @@ from motok_robot.data.clip import (
 )
 from motok_robot.errors import InputError
 from motok_robot.motion.features import resample
+from motok_robot.motion.rotations import rotation_about_axis
 
 INCH = 0.0254
 
@@ -253,25 +254,13 @@ def read_amc(path: str | Path, skeleton: AsfSkeleton, text: str | None = None) -
     return AmcMotion(values, len(frames), where)
 
 
-def _rot(axis: str, angle: np.ndarray) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    o, z = np.ones_like(c), np.zeros_like(c)
-    if axis == "X":
-        m = [[o, z, z], [z, c, -s], [z, s, c]]
-    elif axis == "Y":
-        m = [[c, z, s], [z, o, z], [-s, z, c]]
-    else:
-        m = [[c, -s, z], [s, c, z], [z, z, o]]
-    return np.stack([np.stack(r, -1) for r in m], -2)
-
-
 def euler_fixed(angles: np.ndarray, order: str) -> np.ndarray:
     """Rotation matrices ``[..., 3, 3]`` for angles (radians) ``[..., len(order)]`` applied in
     ``order`` about fixed axes: ``R = R(order[-1]) @ ... @ R(order[0])``."""
     angles = np.asarray(angles, dtype=np.float64)
     R = np.broadcast_to(np.eye(3), angles.shape[:-1] + (3, 3)).copy()
     for k, ax in enumerate(order):
-        R = _rot(ax, angles[..., k]) @ R
+        R = rotation_about_axis(angles[..., k], "XYZ".index(ax)) @ R
     return R
 
 

@@ -42,6 +42,7 @@ from motok_robot.data.clip import (
 )
 from motok_robot.errors import InputError
 from motok_robot.motion.features import resample
+from motok_robot.motion.rotations import rotation_about_axis
 
 _CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 
@@ -239,19 +240,6 @@ def _channel_label(skeleton: BvhSkeleton, column: int) -> str:
 
 # ----------------------------------------------------------------------------- kinematics
 
-def _axis_rotation(axis: str, angle_rad: np.ndarray) -> np.ndarray:
-    """``[T, 3, 3]`` rotation matrices about x, y or z by ``angle_rad[T]``."""
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
-    o, z = np.ones_like(c), np.zeros_like(c)
-    if axis == "X":
-        m = [[o, z, z], [z, c, -s], [z, s, c]]
-    elif axis == "Y":
-        m = [[c, z, s], [z, o, z], [-s, z, c]]
-    else:
-        m = [[c, -s, z], [s, c, z], [z, z, o]]
-    return np.stack([np.stack(r, -1) for r in m], -2)
-
-
 def forward_kinematics(motion: BvhMotion) -> dict[str, np.ndarray]:
     """World positions of every joint and End Site: ``{name: float64 [T, 3]}`` (file units/axes)."""
     skel = motion.skeleton
@@ -269,7 +257,7 @@ def forward_kinematics(motion: BvhMotion) -> dict[str, np.ndarray]:
             if ch.endswith("position"):
                 t[:, "XYZ".index(ch[0])] = col
             else:
-                Rk = _axis_rotation(ch[0], np.deg2rad(col))
+                Rk = rotation_about_axis(np.deg2rad(col), "XYZ".index(ch[0]))
                 R = Rk if R is None else R @ Rk
         if joint.parent < 0:
             p = t
