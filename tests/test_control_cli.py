@@ -132,7 +132,7 @@ def test_obstacle_term_keeps_joints_out(runs, tmp_path):
     from motok_robot.control.metrics import obstacle_penetration
 
     traj = ["--trajectory", str(EXAMPLES / "trajectory_sparse.csv")]
-    base = ["generate", "a person walks forward", "--seed", "2"] + FAST + _models(runs) + traj
+    base = ["generate", "a person walks forward", "--seed", "2", "--decoder-steps", "4"] + _models(runs) + traj
     # an obstacle between two waypoints: following the waypoints alone walks through it
     obstacles = tmp_path / "on_path.json"
     obstacles.write_text(json.dumps({"obstacles": [{"type": "circle", "center": [1.94, 0.50], "radius": 0.3}]}))
