@@ -72,7 +72,7 @@ def load_motion(path: str | Path) -> dict[str, np.ndarray | str | int]:
     try:
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
-    except (ValueError, OSError, zipfile.BadZipFile) as exc:
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
         raise InputError(f"{path}: not a readable .npz file ({exc})") from None
     for key in ("joints", "fps"):
         if key not in data:
