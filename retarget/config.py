@@ -47,6 +47,7 @@ class CostWeights:
     nominal: float = 0.01  # |joints - nominal joints|^2
     base_tilt: float = 0.1  # (pitch^2 + roll^2) of the base: keeps the torso upright when unobserved
     com: float = 0.0  # soft: horizontal CoM distance to the support centre (leg lengths)^2, in contact frames
+    zmp: float = 0.0  # soft: cart-table ZMP distance to the support centre (leg lengths)^2, in contact frames
 
 
 @dataclass(frozen=True)

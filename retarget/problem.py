@@ -15,14 +15,19 @@ optimiser out of flipped or lying-down local minima. No unit-norm constraint is 
 
 **Parameters** (a numeric vector ``p``, so one compiled solver serves every window):
 scaled human keypoint targets ``[W, K, 3]``, human heading ``[W]``, human foot directions
-``[W, 2, 2]``, contact masks ``[W, 2]`` (used by the soft CoM term), the two committed
-frames before the window ``[2, nx]`` and a flag that says whether they exist.
+``[W, 2, 2]``, contact masks ``[W, 2]`` (used by the soft balance terms), the two committed
+frames before the window ``[2, nx]``, a flag that says whether they exist, and
+(frames per second, ground height).
 
 **Objective** (sum over frames; positions divided by the robot leg length ``L``):
 keypoint error ``w_k |site - target|^2 / L^2``; heading ``(yaw - heading)^2``; per foot
 ``|sole forward (xy) - human foot direction|^2``; velocity ``|x[t]-x[t-1]|^2`` and
 acceleration ``|x[t+1]-2x[t]+x[t-1]|^2`` (base position in leg lengths), including the
-committed frames before the window; ``|joints - nominal|^2``; base tilt; optional soft CoM.
+committed frames before the window; ``|joints - nominal|^2``; base tilt; optional soft balance
+terms in contact frames: CoM over the support centre (``CostWeights.com``) and the cart-table
+ZMP ``c_xy - (c_z - ground) c''_xy / (g + c''_z)`` (CoM second difference times fps^2) over the
+support centre (``CostWeights.zmp``); the support centre is the sole site of the foot in
+contact, the midpoint of both in double support.
 
 **Constraints** ``g`` per frame (bounds chosen per call, so contact phases need no rebuild):
 
@@ -53,6 +58,7 @@ from retarget.kinematics import KinematicTree, center_of_mass, forward_kinematic
 from retarget.robot_model import RetargetRobot
 
 SIDES = ("left", "right")
+GRAVITY = 9.81  # m/s^2, for the cart-table ZMP of the soft balance term
 BASE_NAMES = ("base_x", "base_y", "base_z", "base_yaw", "base_pitch", "base_roll")
 
 
@@ -224,7 +230,8 @@ class WindowProblem:
         P_contact = ca.SX.sym("contact", 2, W)
         P_hist = ca.SX.sym("hist", nx, 2)
         P_has_hist = ca.SX.sym("has_hist")
-        params = [P_target, P_heading, P_foot, P_contact, P_hist, P_has_hist]
+        P_clock = ca.SX.sym("clock", 2)  # frames per second, ground height (m)
+        params = [P_target, P_heading, P_foot, P_contact, P_hist, P_has_hist, P_clock]
         self._param_shapes = [p.shape for p in params]
 
         kp_w = np.array([k.weight for k in robot.keypoints], dtype=np.float64)
@@ -251,10 +258,24 @@ class WindowProblem:
             dj = xt[6:] - nominal_j
             res.append(sq(weights.nominal) * dj)
             res.append(sq(weights.base_tilt) * xt[4:6])
-            if weights.com > 0:
+            if weights.com > 0 or weights.zmp > 0:
                 m = P_contact[:, t]
                 centre = (m[0] * sole[:2, 0] + m[1] * sole[:2, 1]) / (m[0] + m[1] + 1e-9)
-                res.append(sq(weights.com) * ca.fmin(m[0] + m[1], 1.0) * (com[:2] - centre) / L)
+                support = ca.fmin(m[0] + m[1], 1.0)
+            if weights.com > 0:
+                res.append(sq(weights.com) * support * (com[:2] - centre) / L)
+            if weights.zmp > 0 and W >= 3:
+                # cart-table ZMP from the CoM's second difference (central; one-sided at the
+                # window's last frame; the committed frame before the window at its first)
+                if t == 0:
+                    c3, zw = (hist_frame[4], com, frames[1][4]), P_has_hist
+                elif t == W - 1:
+                    c3, zw = (frames[t - 2][4], frames[t - 1][4], com), 1.0
+                else:
+                    c3, zw = (frames[t - 1][4], com, frames[t + 1][4]), 1.0
+                acc_c = (c3[0] - 2 * c3[1] + c3[2]) * P_clock[0] ** 2
+                zmp = com[:2] - (com[2] - P_clock[1]) * acc_c[:2] / (GRAVITY + acc_c[2])
+                res.append(sq(weights.zmp) * zw * support * (zmp - centre) / L)
             # smoothness, including the committed frames before the window
             prev = X[:, t - 1] if t >= 1 else P_hist[:, 1]
             hw = 1.0 if t >= 1 else P_has_hist
@@ -383,6 +404,7 @@ class WindowProblem:
         flat: np.ndarray | None = None,
         flat_tolerance: float = 0.0,
         transition_step: float = np.inf,
+        fps: float = 20.0,
     ) -> WindowSolution:
         """Solve one window.
 
@@ -390,7 +412,7 @@ class WindowProblem:
         ``contacts[W, 2]`` bool; ``history[2, nx]`` the two committed frames before the window (or None);
         ``prev_contact[2]`` contact state of the frame before; ``vel_step[nj]`` max joint change per frame (rad);
         ``clearance[W, 2]``, ``flat[W, 2]``, ``flat_tolerance``, ``transition_step``: swing-foot
-        bounds, see :meth:`constraint_bounds`.
+        bounds, see :meth:`constraint_bounds`; ``fps`` frames per second (for the ZMP term).
         """
         import time
 
@@ -404,6 +426,7 @@ class WindowProblem:
                 np.asarray(contacts, dtype=np.float64).reshape(W, 2).T.ravel(order="F"),
                 hist.ravel(order="F"),
                 [0.0 if history is None else 1.0],
+                [float(fps), float(ground)],
             ]
         )
         lbg, ubg = self.constraint_bounds(contacts, None if history is None else prev_contact, vel_step, ground,

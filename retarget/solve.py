@@ -162,7 +162,7 @@ class Retargeter:
     def _slice(bounds: dict, s: int, e: int) -> dict:
         return {k: (v[s:e] if isinstance(v, np.ndarray) else v) for k, v in bounds.items()}
 
-    def _presolve(self, x, known, n, first_window: int, targets: HumanTargets, kp_targets, contacts, vel_step, swing: dict) -> None:
+    def _presolve(self, x, known, n, first_window: int, targets: HumanTargets, kp_targets, contacts, vel_step, swing: dict, fps: float) -> None:
         """Sweep the first window in chunks of ``n`` frames (each chunk chained to the previous one
         and warm-started from it by nearest pose): a cheap, rough first pass that warm-starts the
         first full window much better than the nominal pose does."""
@@ -172,7 +172,7 @@ class Retargeter:
             history = x[s - 2 : s] if s >= 2 else None
             sol = prob.solve(x0, kp_targets[s : s + n], targets.heading[s : s + n], targets.foot_dir[s : s + n],
                              contacts[s : s + n], history, contacts[s - 1] if s else None, vel_step, self.config.ground_height,
-                             **self._slice(swing, s, s + n))
+                             **self._slice(swing, s, s + n), fps=fps)
             x[s : s + n] = sol.x
             known[s : s + n] = True
 
@@ -214,13 +214,13 @@ class Retargeter:
         for s, e, commit in bar:
             prob = self.problem(e - s)
             if s == 0 and known.sum() == 0 and self._presolve_size(e) > 0:
-                self._presolve(x, known, self._presolve_size(e), e, targets, kp_targets, contacts, vel_step, swing)
+                self._presolve(x, known, self._presolve_size(e), e, targets, kp_targets, contacts, vel_step, swing, fps)
             x0 = self._warm_start(x, known, s, e, targets, kp_targets)
             history = x[s - 2 : s] if s >= 2 else (np.stack([x[0], x[0]]) if s == 1 else None)
             prev_contact = contacts[s - 1] if s >= 1 else None
             sol = prob.solve(
                 x0, kp_targets[s:e], targets.heading[s:e], targets.foot_dir[s:e], contacts[s:e],
-                history, prev_contact, vel_step, cfg.ground_height, **self._slice(swing, s, e),
+                history, prev_contact, vel_step, cfg.ground_height, **self._slice(swing, s, e), fps=fps,
             )
             x[s:e] = sol.x
             known[s:e] = True
