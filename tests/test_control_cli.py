@@ -4,7 +4,6 @@ examples/, bad files as one-line errors, and the `eval control` protocol."""
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import numpy as np
