@@ -32,6 +32,10 @@ def register(commands, groups) -> None:
     p.add_argument("--no-scale", action="store_true", help="use the joints as robot targets unscaled (motion already robot-sized)")
     p.add_argument("--skeleton", default="bandai", help="BVH joint map: bandai, acrnn or a joint-map JSON file (default bandai)")
     p.add_argument("--asf", default=None, help="ASF skeleton file for an .amc input (default: the only .asf next to it)")
+    p.add_argument("--swing-height", type=float, default=d.swing.height, metavar="LEGS",
+                   help=f"mid-swing clearance of the lowest sole corner, in robot leg lengths (default {d.swing.height}; 0 = no swing-foot constraints)")
+    p.add_argument("--com-weight", type=float, default=d.weights.com, help=f"soft CoM-over-support weight (default {d.weights.com} = off)")
+    p.add_argument("--zmp-weight", type=float, default=d.weights.zmp, help=f"soft cart-table ZMP-over-support weight (default {d.weights.zmp} = off; 300 measured in docs/retarget.md)")
     p.add_argument("--plot", default=None, metavar="FILE.png", help="also draw the result (targets vs robot, sole heights, errors)")
     p.set_defaults(func=run)
 
@@ -39,7 +43,7 @@ def register(commands, groups) -> None:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from motok_robot.errors import MotokError
+    from motok_robot.errors import InputError, MotokError
     from retarget.config import RetargetConfig
     from retarget.io import read_input, write_robot_npz
     from retarget.metrics import measure
@@ -50,6 +54,12 @@ def run(args: argparse.Namespace) -> int:
         RetargetConfig(), window=args.window, overlap=args.overlap, mode=args.mode,
         allow_partial=args.allow_partial, scale=not args.no_scale,
     )
+    for name in ("swing_height", "com_weight", "zmp_weight"):
+        value = getattr(args, name)
+        if not value >= 0:  # also rejects NaN
+            raise InputError(f"--{name.replace('_', '-')} must be >= 0, got {value}")
+    config = replace(config, swing=replace(config.swing, height=args.swing_height),
+                     weights=replace(config.weights, com=args.com_weight, zmp=args.zmp_weight))
     motion = read_input(args.input, skeleton=args.skeleton, asf=args.asf)
     robot = load_robot(args.robot)
     import time

@@ -119,3 +119,6 @@ class RetargetConfig:
     ground_height: float = 0.0  # metres, world z of the floor
     presolve_frames: int = 15  # the first window is warm-started by a sweep of windows this long (0 = off)
     velocity_margin: float = 0.98  # use this fraction of each joint's velocity limit
+    # the inner sole edges stay at least this far apart across the human heading (robot leg lengths;
+    # None = off): scaled human feet pass closer than a robot's wide soles allow (op3_like: 4.4 mm gap)
+    min_foot_gap: float | None = 0.02

@@ -41,7 +41,9 @@ contact, the midpoint of both in double support.
 * swing foot (bounds on the same rows, from :mod:`retarget.swing`): out of contact all four
   corners at least a clearance above the ground that rises from lift-off and falls to
   touch-down; in the swing frame next to a contact frame the corners lie in a thin band
-  (flat, low sole) and the sole site moves at most a small step horizontally.
+  (flat, low sole) and the sole site moves at most a small step horizontally;
+* the lateral distance of the left sole site from the right one across the human heading is
+  at least a minimum (the feet do not cross into each other).
 
 Joint ranges and the base tilt, yaw and height bounds are variable bounds (no rows in ``g``).
 """
@@ -303,7 +305,12 @@ class WindowProblem:
                 e_prev = pc[:2, 1] - pc[:2, 0]
                 g.append(e_now[0] * e_prev[1] - e_now[1] * e_prev[0])
                 names += [f"{side} sole yaw slip"]
-        self._ng_frame = nv + 2 * (4 + 2 + 1)
+            # lateral distance of the left sole site from the right one, across the human heading
+            h = P_heading[t]
+            d = sole[:2, 0] - sole[:2, 1]
+            g.append(-ca.sin(h) * d[0] + ca.cos(h) * d[1])
+            names += ["feet lateral separation"]
+        self._ng_frame = nv + 2 * (4 + 2 + 1) + 1
         self._names = names
         self.nlp_x = ca.vec(X)
         p = ca.vertcat(*[ca.vec(q) for q in params])
@@ -350,6 +357,7 @@ class WindowProblem:
         flat: np.ndarray | None = None,
         flat_tolerance: float = 0.0,
         transition_step: float = np.inf,
+        min_separation: float = -np.inf,
     ):
         """Bounds ``(lbg, ubg)`` for a window's contact mask ``[W, 2]`` and the contact state of the
         frame before it (``None`` = no committed frame before the window).
@@ -358,7 +366,9 @@ class WindowProblem:
         swing frames; ``flat[W, 2]`` bool (optional): swing frames whose corners must also stay
         below ``ground + clearance + flat_tolerance`` (flat, low sole at lift-off / touch-down);
         ``transition_step`` (m): largest horizontal sole-site move between a contact frame and
-        the swing frame next to it (lift-off and touch-down; ``inf`` = free).
+        the swing frame next to it (lift-off and touch-down; ``inf`` = free); ``min_separation``
+        (m): smallest lateral distance of the left sole site from the right one, measured across
+        the human heading (``-inf`` = free; keeps the feet from crossing into each other).
         """
         nj = self.kin.nj
         lb, ub = [], []
@@ -387,6 +397,8 @@ class WindowProblem:
                     slip = inf
                 lb.append(np.array([-slip, -slip, -inf if slip > 0 else 0.0]))
                 ub.append(np.array([slip, slip, inf if slip > 0 else 0.0]))
+            lb.append([min_separation])
+            ub.append([inf])
         return np.concatenate(lb), np.concatenate(ub)
 
     def solve(
@@ -405,6 +417,7 @@ class WindowProblem:
         flat_tolerance: float = 0.0,
         transition_step: float = np.inf,
         fps: float = 20.0,
+        min_separation: float = -np.inf,
     ) -> WindowSolution:
         """Solve one window.
 
@@ -430,7 +443,7 @@ class WindowProblem:
             ]
         )
         lbg, ubg = self.constraint_bounds(contacts, None if history is None else prev_contact, vel_step, ground,
-                                          clearance, flat, flat_tolerance, transition_step)
+                                          clearance, flat, flat_tolerance, transition_step, min_separation)
         lbx, ubx = self.lbx.copy(), self.ubx.copy()
         yaw_ref = np.asarray(heading, dtype=np.float64).ravel() + self.kin.nominal_x[3]
         lbx[3::nx] = yaw_ref - self.solver_config.max_yaw_offset

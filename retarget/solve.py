@@ -149,14 +149,28 @@ class Retargeter:
     def _swing_bounds(self, contacts: np.ndarray, fps: float) -> dict:
         """Swing-foot keyword arguments of :meth:`WindowProblem.solve` for the whole clip."""
         sw, L = self.config.swing, self.kin.leg_length
+        gap = self.config.min_foot_gap
+        sep = -np.inf if gap is None else self._sole_width() + gap * self.kin.leg_length
         if sw.height <= 0:
-            return {"clearance": None, "flat": None, "flat_tolerance": 0.0, "transition_step": np.inf}
+            return {"clearance": None, "flat": None, "flat_tolerance": 0.0, "transition_step": np.inf, "min_separation": sep}
         return {
+            "min_separation": sep,
             "clearance": swing_clearance(contacts, fps, L, sw),
             "flat": transition_frames(contacts),
             "flat_tolerance": sw.flat_tolerance * L,
             "transition_step": sw.transition_speed * L / fps,
         }
+
+    def _sole_width(self) -> float:
+        """Smallest lateral distance (m) between the two sole sites at which the soles just touch:
+        half the lateral extent of each sole (corners relative to its site) in the nominal pose, summed."""
+        out = self.kin.frame(self.kin.nominal_x)
+        site, corners = np.array(out[1]).T, np.array(out[3]).T.reshape(2, 4, 3)
+        yaw = self.kin.nominal_x[3]
+        across = np.array([-np.sin(yaw), np.cos(yaw)])
+        left = float(-((corners[0, :, :2] - site[0, :2]) @ across).min())  # extent towards the right foot
+        right = float(((corners[1, :, :2] - site[1, :2]) @ across).max())  # extent towards the left foot
+        return left + right
 
     @staticmethod
     def _slice(bounds: dict, s: int, e: int) -> dict:

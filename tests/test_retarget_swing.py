@@ -89,7 +89,7 @@ def test_swing_feet_clear_the_floor_and_land_flat(robot):
 def test_soft_zmp_term_pulls_zmp_over_support(robot):
     human = synthetic_walk(T=40)
     base = Retargeter(robot, SMALL)
-    with_zmp = Retargeter(robot, replace(SMALL, weights=replace(SMALL.weights, zmp=1000.0)))
+    with_zmp = Retargeter(robot, replace(SMALL, weights=replace(SMALL.weights, zmp=300.0)))
 
     def zmp_offset(rt, res, fps=20.0):
         out = rt.kin.frame.map(len(res.x))(res.x.T)
@@ -106,3 +106,21 @@ def test_soft_zmp_term_pulls_zmp_over_support(robot):
     b = with_zmp.run(human, 20.0, progress=False)
     assert b.success, b.solver_status()
     assert zmp_offset(with_zmp, b) < 0.7 * zmp_offset(base, a)
+
+
+def test_feet_keep_a_gap_when_the_human_feet_pass_close(robot):
+    human = synthetic_walk(T=40)
+    for name in ("left_ankle", "left_foot", "right_ankle", "right_foot"):
+        human[:, JOINT_INDEX[name], 1] = 0.0  # a walk on a line: the feet pass through each other
+    rt = Retargeter(robot, SMALL)
+    res = rt.run(human, 20.0, progress=False)
+    assert res.success, res.solver_status()
+    site, _ = sole_points(rt.kin, res.x)
+    h = res.targets.heading
+    lateral = -np.sin(h) * (site[:, 0, 0] - site[:, 1, 0]) + np.cos(h) * (site[:, 0, 1] - site[:, 1, 1])
+    need = rt._sole_width() + SMALL.min_foot_gap * rt.kin.leg_length
+    assert lateral.min() >= need - 1e-5
+    free = Retargeter(robot, replace(SMALL, min_foot_gap=None)).run(human, 20.0, progress=False)
+    site_f, _ = sole_points(rt.kin, free.x)
+    lateral_f = -np.sin(h) * (site_f[:, 0, 0] - site_f[:, 1, 0]) + np.cos(h) * (site_f[:, 0, 1] - site_f[:, 1, 1])
+    assert lateral_f.min() < need - 1e-3  # without the constraint the soles come closer than that
