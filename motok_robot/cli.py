@@ -28,7 +28,9 @@ GROUPS = {
     "servo": "scan and calibrate a Dynamixel servo bus",
 }
 
-# Modules that add subcommands, in the order they appear in --help.
+# Modules that add subcommands, in the order they appear in --help. The LEADING ones add only
+# top-level commands and come before the groups.
+LEADING = ("motok_robot.pipeline_cli",)
 REGISTRARS = (
     "motok_robot.pipeline_cli",
     "motok_robot.data.cli",
@@ -50,12 +52,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"motok-robot {__version__}")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")
-    groups = {}
-    for name, help_text in GROUPS.items():
-        group_parser = commands.add_parser(name, help=help_text, description=help_text)
-        groups[name] = group_parser.add_subparsers(dest=f"{name}_command", metavar="SUBCOMMAND")
-        group_parser.set_defaults(func=_group_help(group_parser))
+    groups: dict = {}
     for module_name in REGISTRARS:
+        if module_name not in LEADING and not groups:  # the groups follow the leading commands in --help
+            for name, help_text in GROUPS.items():
+                group_parser = commands.add_parser(name, help=help_text, description=help_text)
+                groups[name] = group_parser.add_subparsers(dest=f"{name}_command", metavar="SUBCOMMAND")
+                group_parser.set_defaults(func=_group_help(group_parser))
         try:
             module = importlib.import_module(module_name)
         except ModuleNotFoundError as exc:  # a stage not built yet: skip only that exact module
