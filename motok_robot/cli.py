@@ -59,13 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
                 group_parser = commands.add_parser(name, help=help_text, description=help_text)
                 groups[name] = group_parser.add_subparsers(dest=f"{name}_command", metavar="SUBCOMMAND")
                 group_parser.set_defaults(func=_group_help(group_parser))
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:  # a stage not built yet: skip only that exact module
-            if exc.name == module_name:
-                continue
-            raise
-        module.register(commands, groups)
+        importlib.import_module(module_name).register(commands, groups)
     return parser
 
 
