@@ -32,8 +32,8 @@ def register(commands, groups) -> None:
     p.add_argument("--no-scale", action="store_true", help="use the joints as robot targets unscaled (motion already robot-sized)")
     p.add_argument("--skeleton", default="bandai", help="BVH joint map: bandai, acrnn or a joint-map JSON file (default bandai)")
     p.add_argument("--asf", default=None, help="ASF skeleton file for an .amc input (default: the only .asf next to it)")
-    p.add_argument("--swing-height", type=float, default=d.swing.height, metavar="LEGS",
-                   help=f"mid-swing clearance of the lowest sole corner, in robot leg lengths (default {d.swing.height}; 0 = no swing-foot constraints)")
+    p.add_argument("--swing-height", type=float, default=d.swing.height, metavar="M",
+                   help=f"mid-swing clearance of the lowest sole corner in metres (default {d.swing.height}; 0 = no swing-foot constraints)")
     p.add_argument("--com-weight", type=float, default=d.weights.com, help=f"soft CoM-over-support weight (default {d.weights.com} = off)")
     p.add_argument("--zmp-weight", type=float, default=d.weights.zmp, help=f"soft cart-table ZMP-over-support weight (default {d.weights.zmp} = off; 300 measured in docs/retarget.md)")
     p.add_argument("--plot", default=None, metavar="FILE.png", help="also draw the result (targets vs robot, sole heights, errors)")

@@ -52,29 +52,30 @@ class CostWeights:
 
 @dataclass(frozen=True)
 class SwingConfig:
-    """Swing-foot clearance and gentle lift-off / touch-down (hard constraints; lengths in robot
-    leg lengths ``L`` so one default suits every robot size, speeds in ``L`` per second).
+    """Swing-foot clearance and gentle lift-off / touch-down (hard constraints; metres, m/s).
 
     Outside contact phases all four sole corners stay at least ``clearance(t)`` above the
     ground. ``clearance`` rises from ``lift`` in the swing frames next to a contact phase to
     ``height`` (smoothstep over ``ramp_seconds``), so the foot leaves and meets the ground
     without skimming it yet needs no large vertical jump (joint velocity limits still hold).
     Between a contact frame and its neighbouring swing frame the sole site moves at most
-    ``transition_speed * L / fps`` horizontally (the foot lifts and lands nearly vertically
+    ``transition_speed / fps`` per horizontal axis (the foot lifts and lands nearly vertically
     instead of sliding on or off), and in those swing frames the sole is held flat and low:
-    its four corners between ``lift`` and ``lift + flat_tolerance`` (flat touch-down). A swing phase that
-    touches neither contact phase (the whole clip in the air) gets no clearance.
+    its four corners between ``lift`` and ``lift + flat_tolerance`` (flat touch-down). A swing
+    phase that touches no contact phase (the whole clip in the air) gets no clearance.
     ``height = 0`` turns all of this off (the behaviour before this term existed).
 
-    Human walking clears the floor by only ~2 cm (2.5 % of an adult leg); scaled to a small
-    robot that is millimetres, which physics sees as a foot sliding on the floor.
+    Absolute lengths, not leg-length fractions: what the clearance must beat (servo position
+    error and sag under load, floor unevenness, the 5 mm contact height of
+    ``motok-robot validate``) does not shrink with the robot. A human clears the floor by
+    ~2 cm; scaled to a 22 cm leg that is 5 mm, which physics sees as a foot scraping the floor.
     """
 
-    height: float = 0.08  # L; mid-swing clearance of the lowest sole corner (op3_like: 1.8 cm)
-    lift: float = 0.04  # L; clearance in the swing frames next to a contact phase (op3_like: 8.8 mm)
-    ramp_seconds: float = 0.1  # rise time from ``lift`` to ``height``
-    transition_speed: float = 0.2  # L/s; horizontal sole speed at lift-off / touch-down (op3_like: 4.4 cm/s)
-    flat_tolerance: float = 0.01  # L; corner height spread in the lift-off / touch-down swing frames (2.2 mm)
+    height: float = 0.02  # m; mid-swing clearance of the lowest sole corner
+    lift: float = 0.008  # m; clearance in the swing frames next to a contact phase
+    ramp_seconds: float = 0.1  # s; rise time from ``lift`` to ``height``
+    transition_speed: float = 0.04  # m/s; horizontal sole speed at lift-off / touch-down (per axis)
+    flat_tolerance: float = 0.002  # m; corner height band in the lift-off / touch-down swing frames
 
 
 @dataclass(frozen=True)

@@ -148,17 +148,17 @@ class Retargeter:
 
     def _swing_bounds(self, contacts: np.ndarray, fps: float) -> dict:
         """Swing-foot keyword arguments of :meth:`WindowProblem.solve` for the whole clip."""
-        sw, L = self.config.swing, self.kin.leg_length
+        sw = self.config.swing
         gap = self.config.min_foot_gap
         sep = -np.inf if gap is None else self._sole_width() + gap * self.kin.leg_length
         if sw.height <= 0:
             return {"clearance": None, "flat": None, "flat_tolerance": 0.0, "transition_step": np.inf, "min_separation": sep}
         return {
             "min_separation": sep,
-            "clearance": swing_clearance(contacts, fps, L, sw),
+            "clearance": swing_clearance(contacts, fps, sw),
             "flat": transition_frames(contacts),
-            "flat_tolerance": sw.flat_tolerance * L,
-            "transition_step": sw.transition_speed * L / fps,
+            "flat_tolerance": sw.flat_tolerance,
+            "transition_step": sw.transition_speed / fps,
         }
 
     def _sole_width(self) -> float:

@@ -13,14 +13,14 @@ from retarget.config import SwingConfig
 from retarget.contacts import contact_phases
 
 
-def swing_clearance(contacts: np.ndarray, fps: float, leg_length: float, config: SwingConfig = SwingConfig()) -> np.ndarray:
+def swing_clearance(contacts: np.ndarray, fps: float, config: SwingConfig = SwingConfig()) -> np.ndarray:
     """Minimum height (m above the ground) of all sole corners, ``[T, 2]`` (left, right).
 
-    ``contacts[T, 2]`` bool contact mask; ``fps`` frames per second; ``leg_length`` the robot's
-    hip-knee-ankle length (m). Contact frames get 0 (their corners are held *at* the ground by
-    the contact constraints). A swing frame ``d`` frames from the nearest contact frame
-    (``d = 1`` next to it) gets ``lift + (height - lift) * smoothstep((d - 1) / ramp)``, in metres
-    after multiplying by ``leg_length``; ``ramp = ramp_seconds * fps`` frames (at least 1). Only
+    ``contacts[T, 2]`` bool contact mask; ``fps`` frames per second. Contact frames get 0 (their
+    corners are held *at* the ground by the contact constraints). A swing frame ``d`` frames
+    from the nearest contact frame (``d = 1`` next to it) gets
+    ``lift + (height - lift) * smoothstep((d - 1) / ramp)`` metres, ``ramp = ramp_seconds * fps``
+    frames (at least 1). Only
     contact phases inside the clip count: a clip that starts or ends in swing has no ramp there.
     """
     c = np.asarray(contacts, dtype=bool)
@@ -29,7 +29,7 @@ def swing_clearance(contacts: np.ndarray, fps: float, leg_length: float, config:
     if config.height <= 0 or T == 0:
         return out
     ramp = max(1.0, float(config.ramp_seconds) * float(fps))
-    lift, height = min(config.lift, config.height) * leg_length, config.height * leg_length
+    lift, height = min(config.lift, config.height), config.height
     for s in range(2):
         for a, b in contact_phases(~c[:, s]):  # swing runs [a, b)
             if a == 0 and b == T:
