@@ -23,6 +23,12 @@ FOOT_JOINTS = (JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"])
 FOOT_CONTACT_HEIGHT = 0.05
 #: softness of the contact weight around the threshold (m)
 FOOT_CONTACT_SOFTNESS = 0.01
+#: joints whose lowest one carries the body (ankles and feet, as the floating metric)
+SUPPORT_JOINTS = tuple(JOINT_INDEX[n] for n in ("left_ankle", "left_foot", "right_ankle", "right_foot"))
+#: below this height (m) the lowest foot joint is pulled to the floor; above, the body is airborne
+STANDING_HEIGHT = 0.15
+#: height (m) of the lowest foot joint that counts as standing (the metric's float tolerance)
+FLOAT_TOLERANCE = 0.005
 
 
 @dataclass
@@ -90,7 +96,13 @@ def obstacle_loss(joints: torch.Tensor, ct: ConstraintTensors) -> torch.Tensor:
 
 
 def foot_loss(joints: torch.Tensor) -> torch.Tensor:
-    """Physics terms: feet in contact do not slide, feet never go below the floor (z = 0), ``[B]``."""
+    """Physics terms, ``[B]``: feet in contact do not slide, feet never go below the floor
+    (z = 0), and a body standing near the floor stands on it.
+
+    The last term pulls the lowest of the four foot joints (ankles, feet) of every frame where
+    it is lower than :data:`STANDING_HEIGHT` down to :data:`FLOAT_TOLERANCE` above the floor;
+    higher frames (jumps) are left alone.
+    """
     feet = joints[:, :, list(FOOT_JOINTS), :]
     height = feet[..., 2]
     # the contact weight is a label, not something to optimise: with its gradient the cheapest
@@ -99,7 +111,10 @@ def foot_loss(joints: torch.Tensor) -> torch.Tensor:
     both = contact[:, 1:] * contact[:, :-1]
     slide = (feet[:, 1:, :, :2] - feet[:, :-1, :, :2]).pow(2).sum(-1)
     below = (-height).clamp(min=0.0).pow(2)
-    return (both * slide).mean(dim=(1, 2)) + below.mean(dim=(1, 2))
+    lowest = joints[:, :, list(SUPPORT_JOINTS), 2].min(dim=-1).values  # [B, T]
+    standing = torch.sigmoid((STANDING_HEIGHT - lowest.detach()) / FOOT_CONTACT_SOFTNESS)
+    floating = standing * (lowest - FLOAT_TOLERANCE).clamp(min=0.0).pow(2)
+    return (both * slide).mean(dim=(1, 2)) + below.mean(dim=(1, 2)) + floating.mean(dim=1)
 
 
 _CHILDREN = list(range(1, len(PARENTS)))
