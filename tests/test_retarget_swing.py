@@ -89,7 +89,7 @@ def test_swing_feet_clear_the_floor_and_land_flat(robot):
 def test_soft_zmp_term_pulls_zmp_over_support(robot):
     human = synthetic_walk(T=40)
     base = Retargeter(robot, SMALL)
-    with_zmp = Retargeter(robot, replace(SMALL, weights=replace(SMALL.weights, zmp=300.0)))
+    with_zmp = Retargeter(robot, replace(SMALL, weights=replace(SMALL.weights, zmp=30.0)))
 
     def zmp_offset(rt, res, fps=20.0):
         out = rt.kin.frame.map(len(res.x))(res.x.T)
