@@ -24,7 +24,13 @@ def add_control_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--suffix", metavar="MOTION", help="motion.npz whose frames end the clip (in-betweening)")
     group.add_argument("--edit", metavar="MOTION", help="motion.npz to edit: keep --keep joints, re-synthesise the rest")
     group.add_argument("--keep", default="lower_body", help="joints or group kept by --edit (lower_body, upper_body, left_arm, right_arm, legs, or joint names)")
-    group.add_argument("--foot-physics", action="store_true", help="feet in contact do not slide or sink (physics-aware decoding)")
+    group.add_argument(
+        "--foot-physics",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="feet in contact do not slide or sink (physics-aware decoding); on by default whenever a trajectory, "
+        "keyframes, obstacles, prefix/suffix or edit is given (--no-foot-physics turns it off)",
+    )
     group.add_argument(
         "--guidance",
         default=None,
@@ -46,7 +52,11 @@ def add_mechanism_arguments(group) -> None:
 
 
 def has_control(args: argparse.Namespace) -> bool:
-    return any(getattr(args, name, None) for name in ("trajectory", "keyframes", "obstacles", "prefix", "suffix", "edit", "foot_physics"))
+    return any(getattr(args, name, None) for name in (*_CONSTRAINT_OPTIONS, "foot_physics"))
+
+
+#: options that lay kinematic constraints on the clip
+_CONSTRAINT_OPTIONS = ("trajectory", "keyframes", "obstacles", "prefix", "suffix", "edit")
 
 
 def constraints_from_args(args: argparse.Namespace, frames: int):
@@ -68,7 +78,9 @@ def constraints_from_args(args: argparse.Namespace, frames: int):
         C.add_suffix(c, args.suffix)
     if args.edit:
         C.add_edit(c, args.edit, args.keep)
-    c.foot_physics = bool(args.foot_physics)
+    # physics-aware decoding is the default with any kinematic constraint: without it the body is
+    # moved along the path while the decoded legs do not step at the new speed (feet slide)
+    c.foot_physics = args.foot_physics if args.foot_physics is not None else True
     return c
 
 
