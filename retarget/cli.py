@@ -34,6 +34,8 @@ def register(commands, groups) -> None:
     p.add_argument("--asf", default=None, help="ASF skeleton file for an .amc input (default: the only .asf next to it)")
     p.add_argument("--swing-height", type=float, default=d.swing.height, metavar="M",
                    help=f"mid-swing clearance of the lowest sole corner in metres (default {d.swing.height}; 0 = no swing-foot constraints)")
+    p.add_argument("--foot-gap", type=float, default=d.min_foot_gap, metavar="LEGS",
+                   help=f"smallest gap between the inner sole edges across the heading, robot leg lengths (default {d.min_foot_gap}; negative = off)")
     p.add_argument("--com-weight", type=float, default=d.weights.com, help=f"soft CoM-over-support weight (default {d.weights.com} = off)")
     p.add_argument("--zmp-weight", type=float, default=d.weights.zmp, help=f"soft cart-table ZMP-over-support weight (default {d.weights.zmp} = off; 300 measured in docs/retarget.md)")
     p.add_argument("--plot", default=None, metavar="FILE.png", help="also draw the result (targets vs robot, sole heights, errors)")
@@ -58,7 +60,11 @@ def run(args: argparse.Namespace) -> int:
         value = getattr(args, name)
         if not value >= 0:  # also rejects NaN
             raise InputError(f"--{name.replace('_', '-')} must be >= 0, got {value}")
-    config = replace(config, swing=replace(config.swing, height=args.swing_height),
+    gap = args.foot_gap
+    if gap is not None and gap != gap:  # NaN
+        raise InputError("--foot-gap must be a number")
+    config = replace(config, min_foot_gap=None if gap is None or gap < 0 else gap,
+                     swing=replace(config.swing, height=args.swing_height),
                      weights=replace(config.weights, com=args.com_weight, zmp=args.zmp_weight))
     motion = read_input(args.input, skeleton=args.skeleton, asf=args.asf)
     robot = load_robot(args.robot)

@@ -124,3 +124,13 @@ def test_feet_keep_a_gap_when_the_human_feet_pass_close(robot):
     site_f, _ = sole_points(rt.kin, free.x)
     lateral_f = -np.sin(h) * (site_f[:, 0, 0] - site_f[:, 1, 0]) + np.cos(h) * (site_f[:, 0, 1] - site_f[:, 1, 1])
     assert lateral_f.min() < need - 1e-3  # without the constraint the soles come closer than that
+
+
+def test_cli_rejects_negative_swing_height(tmp_path, capsys):
+    from motok_robot.cli import main
+
+    motion = tmp_path / "motion.npz"
+    np.savez(motion, joints=synthetic_walk(T=10).astype(np.float32), fps=20)
+    out = tmp_path / "robot.npz"
+    assert main(["retarget", str(motion), "--robot", "op3_like", "--out", str(out), "--swing-height", "-0.01"]) == 2
+    assert "--swing-height must be >= 0" in capsys.readouterr().err and not out.exists()
