@@ -330,3 +330,22 @@ def test_motor_actuated_robot_tracks_through_a_pd_servo_law():
     assert stand.report["metrics"]["tracking_rmse_rad"] < 0.02
     fall = run(motors, S.lift_foot_without_shift(motors, 2.0, FPS))
     assert "fall" in failed(fall)
+
+
+def test_planted_foot_next_to_a_fast_swing_does_not_skate():
+    from motok_robot.sim.kinematic import contact_skating
+
+    fps = 20.0
+    t = np.arange(10)
+    sole = np.zeros((10, 2, 2))
+    contact = np.ones((10, 2), bool)
+    # left foot: planted for frames 0-4, then swings away fast (0.1 m per frame)
+    contact[5:, 0] = False
+    sole[5:, 0, 0] = 0.1 * (t[5:] - 4)
+    # right foot: in contact throughout but sliding 1 cm per frame (0.2 m/s)
+    sole[:, 1, 0] = 0.01 * t
+    skating, distance = contact_skating(sole, contact, fps, speed_threshold=0.05)
+    assert not skating[:, 0].any()  # frame 4 borders the swing but the foot did not move
+    assert distance[0] == 0.0
+    assert skating[:, 1].all()
+    assert distance[1] == pytest.approx(0.09)

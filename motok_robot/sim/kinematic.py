@@ -114,10 +114,7 @@ def replay(index: RobotIndex, qpos: np.ndarray, fps: float, config: ValidationCo
     sole_height = corners[:, :, :, 2].min(axis=2)
     contact = sole_height < config.contact_height_m
     sole_speed = np.linalg.norm(finite_difference(sole_pos[:, :, :2], fps), axis=2)
-    skating = contact & (sole_speed > config.skate_speed_mps)
-    step = np.linalg.norm(np.diff(sole_pos[:, :, :2], axis=0), axis=2)  # [T-1, 2]
-    both = contact[1:] & contact[:-1]
-    skate_distance = (step * both).sum(axis=0)
+    skating, skate_distance = contact_skating(sole_pos[:, :, :2], contact, fps, config.skate_speed_mps)
 
     com_vel = finite_difference(com, fps)
     com_speed = np.linalg.norm(com_vel[:, :2], axis=1)
@@ -147,3 +144,27 @@ def replay(index: RobotIndex, qpos: np.ndarray, fps: float, config: ValidationCo
         quasi_static=com_speed < config.static_com_speed_mps, zmp=zmp, zmp_margin=zmp_margin,
         joint_pos=joint_pos, joint_vel=joint_vel, joint_acc=joint_acc, torque=torque,
         contact_force=contact_force, unsupported_force=unsupported, self_collisions=collisions)
+
+
+def contact_skating(sole_xy: np.ndarray, contact: np.ndarray, fps: float, speed_threshold: float) -> tuple[np.ndarray, np.ndarray]:
+    """Skating frames and distance of the soles while in contact.
+
+    Args:
+        sole_xy: ``[T, 2, 2]`` horizontal sole positions (m) of the left and right foot.
+        contact: ``[T, 2]`` bool, sole in contact with the ground.
+        fps: frames per second.
+        speed_threshold: m/s above which a foot in contact skates.
+
+    Returns:
+        ``(skating [T, 2] bool, distance [2] m)``. Speeds come only from steps whose two frames
+        are both in contact: a central difference at the first or last frame of a contact phase
+        would include the swing frame next to it and flag a planted foot.
+    """
+    step = np.linalg.norm(np.diff(sole_xy, axis=0), axis=-1)  # [T-1, 2] m
+    both = contact[1:] & contact[:-1]
+    distance = (step * both).sum(axis=0)
+    step_speed = np.where(both, step * fps, 0.0)
+    speed = np.zeros(contact.shape)
+    speed[1:] = step_speed
+    speed[:-1] = np.maximum(speed[:-1], step_speed)
+    return contact & (speed > speed_threshold), distance
