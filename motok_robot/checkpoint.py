@@ -15,7 +15,6 @@ Imports torch: only the learning stages use it.
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import Any
@@ -24,6 +23,7 @@ import torch
 from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 
+from motok_robot.config_utils import read_json_object
 from motok_robot.errors import InputError
 
 CONFIG_FILE = "config.json"
@@ -54,11 +54,8 @@ def read_run_config(run_dir: str | Path, *, stage: str, fmt: str, version: int, 
     path = Path(run_dir) / CONFIG_FILE
     if not path.is_file():
         raise InputError(f"{path}: {stage} config not found (is {run_dir} a {stage} run directory?)")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: not valid JSON ({exc})") from None
-    if not isinstance(data, dict) or data.get("format") != fmt or stage not in data:
+    data = read_json_object(path, f"{stage} config")
+    if data.get("format") != fmt or stage not in data:
         section = f" and a '{stage}' section" if name_section else ""
         raise InputError(f"{path}: not a motok {stage} config (expected format {fmt!r}{section})")
     if int(data.get("version", 0)) > version:

@@ -8,6 +8,8 @@ section, the unknown names and the known ones, never a ``TypeError`` from a cons
 from __future__ import annotations
 
 import dataclasses
+import json
+from pathlib import Path
 from typing import Any, TypeVar
 
 from motok_robot.errors import InputError
@@ -41,3 +43,23 @@ def dataclass_to_dict(config: Any) -> dict[str, Any]:
         if isinstance(value, tuple):
             out[key] = list(value)
     return out
+
+
+def read_json_object(path: str | Path, what: str) -> dict:
+    """The JSON object in ``path``; ``what`` names the file's role in messages ("--config", "joint map").
+
+    Raises :class:`InputError` naming the file when it is missing, unreadable, not valid JSON
+    (with the line) or not a JSON object at the top level.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{what} {path}: file not found")
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{what} {path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{what} {path}: cannot be read ({exc})") from None
+    if not isinstance(data, dict):
+        raise InputError(f"{what} {path}: expected a JSON object at the top level, got {type(data).__name__}")
+    return data

@@ -22,13 +22,13 @@ File formats (one example each in ``examples/``):
 from __future__ import annotations
 
 import csv
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from motok_robot.config_utils import read_json_object
 from motok_robot.errors import InputError
 from motok_robot.motion.skeleton import FPS, JOINT_INDEX, JOINT_NAMES, LOWER_BODY, UPPER_BODY
 
@@ -242,16 +242,7 @@ def _add_dense_root(constraints: Constraints, root, where: str) -> Constraints:
 
 
 def _read_json(path: str | Path, what: str) -> dict:
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"{what} file {path} does not exist")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
-    if not isinstance(data, dict):
-        raise InputError(f"{path}: expected a JSON object at the top level")
-    return data
+    return read_json_object(path, f"{what} file")
 
 
 def add_keyframes(constraints: Constraints, path: str | Path, fps: float = FPS) -> Constraints:

@@ -159,17 +159,10 @@ def load_joint_map(path: str | Path) -> dict:
     ASF its own :units), "up_axis": str, "forward": str | None}`` where ``spec`` is a source joint name or
     ``{"between": [a, b], "t": float}``.
     """
-    import json
+    from motok_robot.config_utils import read_json_object
 
     path = Path(path)
-    try:
-        raw = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"{path}: cannot read joint map: {exc}") from None
-    if not isinstance(raw, dict):
-        raise InputError(f"{path}: joint map must be a JSON object")
+    raw = read_json_object(path, "joint map")
     joints = raw.get("joints", {k: v for k, v in raw.items() if k in JOINT_NAMES})
     unknown = [k for k in joints if k not in JOINT_NAMES]
     if unknown:

@@ -131,7 +131,6 @@ def _column_name(c: int) -> str:
 
 def forward_kinematics(frames: np.ndarray, where: str = "") -> dict[str, np.ndarray]:
     """Positions ``{name: float64 [T, 3]}`` (metres, DeepMimic y-up frame) of links and points."""
-    T = frames.shape[0]
     R: dict[str, np.ndarray] = {}
     P: dict[str, np.ndarray] = {}
     for name, (parent, offset, col, kind) in _LINKS.items():

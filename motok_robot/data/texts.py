@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import csv
 import hashlib
-import json
 import random
 import re
 from pathlib import Path
 
+from motok_robot.config_utils import read_json_object
 from motok_robot.errors import InputError
 
 SUBJECTS = ("a person", "someone", "the person", "a human", "a figure")
@@ -292,12 +292,7 @@ def load_text_index(path: str | Path) -> dict[str, list[str]]:
     path = Path(path)
     out: dict[str, list[str]] = {}
     if path.suffix.lower() == ".json":
-        try:
-            raw = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError) as exc:
-            raise InputError(f"{path}: cannot read text index ({exc})") from None
-        if not isinstance(raw, dict):
-            raise InputError(f"{path}: text index must be a JSON object {{key: text or [texts]}}")
+        raw = read_json_object(path, "text index")
         for k, v in raw.items():
             vals = [v] if isinstance(v, str) else v
             if not isinstance(vals, list) or not all(isinstance(s, str) for s in vals):

@@ -190,14 +190,9 @@ def _config_file(path: Path | None, cfg):
 
     if path is None:
         return cfg
-    if not path.is_file():
-        raise InputError(f"--config {path}: file not found")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputError(f"--config {path}: not valid JSON ({exc})") from None
-    if not isinstance(data, dict):
-        raise InputError(f"--config {path}: expected a JSON object of evaluator settings")
+    from motok_robot.config_utils import read_json_object
+
+    data = read_json_object(path, "--config")
     try:
         return EvaluatorConfig.from_dict({**cfg.to_dict(), **data})
     except InputError as exc:

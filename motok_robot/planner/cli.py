@@ -6,7 +6,6 @@ Light module: torch and the models are imported inside the handlers.
 from __future__ import annotations
 
 import argparse
-import json
 import re
 from pathlib import Path
 
@@ -69,13 +68,10 @@ def _train(args: argparse.Namespace) -> int:
 
     planner_over, train_over = {}, {}
     if args.config is not None:
-        if not args.config.is_file():
-            raise InputError(f"--config {args.config}: file not found")
-        try:
-            data = json.loads(args.config.read_text())
-        except json.JSONDecodeError as exc:
-            raise InputError(f"--config {args.config}: not valid JSON ({exc})") from None
-        if not isinstance(data, dict) or set(data) - {"planner", "train"}:
+        from motok_robot.config_utils import read_json_object
+
+        data = read_json_object(args.config, "--config")
+        if set(data) - {"planner", "train"}:
             raise InputError(f"--config {args.config}: expected an object with 'planner' and/or 'train' sections")
         planner_over = dict(data.get("planner", {}))
         train_over = dict(data.get("train", {}))

@@ -12,7 +12,6 @@ Tokens given in ``keep_tokens`` are never changed (token inpainting for editing)
 
 from __future__ import annotations
 
-import math
 
 import torch
 import torch.nn.functional as F

@@ -14,12 +14,12 @@ key is an :class:`~motok_robot.errors.InputError` naming the key.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from motok_robot.config_utils import dataclass_from_dict, dataclass_to_dict
+from motok_robot.config_utils import read_json_object
 from motok_robot.errors import InputError
 
 FORMAT = "motok-tokenizer"
@@ -157,14 +157,7 @@ def to_dict(config) -> dict[str, Any]:
 def read_config_file(path: str | Path) -> tuple[dict[str, Any], dict[str, Any]]:
     """Read a JSON config file -> (tokenizer section, train section), both possibly empty."""
     path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{path}: config file not found") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: not valid JSON ({exc})") from None
-    if not isinstance(data, dict):
-        raise InputError(f"{path}: expected a JSON object with 'tokenizer' and/or 'train' sections")
+    data = read_json_object(path, "config file")
     unknown = sorted(set(data) - {"tokenizer", "train", "format", "version"})
     if unknown:
         raise InputError(f"{path}: unknown section(s) {unknown}; expected 'tokenizer' and/or 'train'")
