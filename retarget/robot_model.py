@@ -15,15 +15,7 @@ import numpy as np
 
 from motok_robot.errors import InputError
 from motok_robot.motion.skeleton import JOINT_INDEX
-
-
-@dataclass(frozen=True)
-class KeypointMap:
-    """Human joint name (canonical 22-joint body) -> robot site, with a cost weight."""
-
-    human_joint: str
-    site: str
-    weight: float = 1.0
+from motok_robot.robots.description import Keypoint
 
 
 @dataclass(frozen=True)
@@ -43,7 +35,7 @@ class RetargetRobot:
     joint_range: np.ndarray  # [nj, 2] rad (metres for slide joints)
     velocity_limit: np.ndarray  # [nj] rad/s
     nominal_qpos: np.ndarray  # [nq] standing pose, soles on the floor
-    keypoints: list[KeypointMap]
+    keypoints: list[Keypoint]  # human joint -> robot site, weight (the robots stage's type)
     soles: dict[str, SoleSites]  # "left", "right"
     limb_scale: dict[str, float] = field(default_factory=dict)  # legs, arms, torso, head
 
@@ -91,7 +83,7 @@ class RetargetRobot:
             joint_range=np.asarray(robot.joint_range),
             velocity_limit=np.asarray(robot.velocity_limit),
             nominal_qpos=np.asarray(robot.nominal_qpos()),
-            keypoints=[KeypointMap(k.human_joint, k.site, float(k.weight)) for k in robot.keypoints],
+            keypoints=list(robot.keypoints),
             soles={side: SoleSites(s.site, tuple(s.corner_sites)) for side, s in robot.soles.items()},
             limb_scale=dict(robot.limb_scale or {}),
         )
@@ -99,10 +91,8 @@ class RetargetRobot:
 
 def load_robot(name_or_path: str | Path) -> RetargetRobot:
     """Load a robot by name or MJCF path through :func:`motok_robot.robots.load`."""
-    try:
-        from motok_robot.robots import load
-    except ImportError as exc:  # pragma: no cover - the robots stage is missing
-        raise InputError(f"cannot load robot {name_or_path!r}: motok_robot.robots is not available ({exc})") from None
+    from motok_robot.robots import load
+
     try:
         robot = load(name_or_path)
     except InputError:

@@ -24,7 +24,8 @@ from retarget.config import ContactConfig, CostWeights, RetargetConfig, SolverCo
 from retarget.contacts import contact_phases, detect_contacts  # noqa: E402
 from retarget.io import read_input, read_robot_npz, write_robot_npz  # noqa: E402
 from retarget.metrics import measure  # noqa: E402
-from retarget.robot_model import KeypointMap, RetargetRobot, SoleSites  # noqa: E402
+from motok_robot.robots.description import Keypoint  # noqa: E402
+from retarget.robot_model import RetargetRobot, SoleSites  # noqa: E402
 from retarget.solve import Retargeter  # noqa: E402
 
 
@@ -123,7 +124,7 @@ def toy_robot() -> RetargetRobot:
         name="toy", model=model, joint_names=names, qpos_adr=adr,
         joint_range=np.array([model.jnt_range[j] for j in range(1, model.njnt)]),
         velocity_limit=np.full(len(names), 6.0), nominal_qpos=nominal,
-        keypoints=[KeypointMap(h, s, 1.0) for h, s in KEYPOINTS.items()],
+        keypoints=[Keypoint(h, s, 1.0) for h, s in KEYPOINTS.items()],
         soles={side: SoleSites(f"{side[0]}_sole", tuple(f"{side[0]}_c{i}" for i in range(4))) for side in ("left", "right")},
         limb_scale={"legs": 0.27, "arms": 0.35, "torso": 0.3, "head": 0.4},
     )
