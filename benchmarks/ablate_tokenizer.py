@@ -48,7 +48,7 @@ CONFIGS = {
 EXTRAS = {
     "diffusion_ds4_k3_eps": {"parameterisation": "eps"},
     "diffusion_ds4_k3_emphasis": {"emphasis": True},
-    "diffusion_ds4_k3_geometric": {"joint_weight": 100.0, "velocity_weight": 100.0, "foot_weight": 100.0},  # m^2 units
+    "diffusion_ds4_k3_no_geometric": {"joint_weight": 0.0, "velocity_weight": 0.0, "foot_weight": 0.0},
 }
 COLUMNS = {  # result key -> table header
     "name": "config",
@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--window", type=int, default=64, help="training window, frames")
     parser.add_argument("--size", choices=tuple(SIZES), default="small")
     parser.add_argument("--only", nargs="+", default=None, help="configuration names to run")
-    parser.add_argument("--extras", action="store_true", help="also eps, emphasis and geometric-loss variants")
+    parser.add_argument("--extras", action="store_true", help="also eps, emphasis and no-geometric-loss variants")
     parser.add_argument("--split", default="val", choices=("train", "val", "test", "all"))
     parser.add_argument("--limit", type=int, default=None, help="evaluate the first N clips of the split")
     parser.add_argument("--sample-steps", type=int, default=None, help="DDIM steps at evaluation (default: config's)")

@@ -31,8 +31,9 @@ def register(commands, groups) -> None:
     train.add_argument("--config", type=Path, default=None,
                        help="JSON file with optional 'tokenizer' and 'train' sections overriding the defaults")
     train.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
-    train.add_argument("--epochs", type=int, default=None, help="epochs (default 100; ignored when --steps is given)")
-    train.add_argument("--steps", type=int, default=None, help="optimiser steps in total (overrides --epochs)")
+    train.add_argument("--epochs", type=int, default=None,
+                       help="train for this many epochs instead of a step count (ignored when --steps is given)")
+    train.add_argument("--steps", type=int, default=None, help="optimiser steps in total (default 5000)")
     train.add_argument("--batch-size", type=int, default=None, help="windows per step (default 64)")
     train.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
     train.add_argument("--device", default=None, help="cpu or cuda (default cpu)")
@@ -66,6 +67,8 @@ def _train(args) -> int:
         value = getattr(args, flag)
         if value is not None:
             train_section[key] = value
+    if args.epochs is not None and args.steps is None:
+        train_section["steps"] = 0  # the epoch count decides the length
     where = str(args.config) if args.config else "defaults"
     tok_cfg = tokenizer_config_from_dict(tok_section, where=f"{where} 'tokenizer'")
     train_cfg = train_config_from_dict(train_section, where=f"{where} 'train'")

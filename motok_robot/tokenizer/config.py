@@ -60,9 +60,9 @@ class TokenizerConfig:
     emphasis_c: float = 5.0  #: emphasis factor c on the root-trajectory dims
     emphasis_dims: tuple[int, ...] = ROOT_TRAJECTORY_DIMS  #: dims multiplied by c
     emphasis_seed: int = 0  #: seed of the fixed standard-normal matrix A'
-    joint_weight: float = 0.0  #: MDM geometric loss: joint positions (m^2), needs features_torch
-    velocity_weight: float = 0.0  #: MDM geometric loss: joint velocities (m^2/frame^2)
-    foot_weight: float = 0.0  #: MDM geometric loss: foot velocity where the contact bit is set
+    joint_weight: float = 1.0  #: MDM geometric loss: joint positions (m^2), through features_torch
+    velocity_weight: float = 1.0  #: MDM geometric loss: joint velocities (m^2/frame^2)
+    foot_weight: float = 1.0  #: MDM geometric loss: foot velocity where the contact bit is set
 
     def __post_init__(self) -> None:
         self.emphasis_dims = tuple(int(d) for d in self.emphasis_dims)
@@ -106,15 +106,15 @@ class TrainConfig:
     seed: int = 0  #: seeds initialisation, window sampling, noise and codebook restarts
     batch_size: int = 64  #: windows per step
     window: int = 64  #: frames per training window (rounded down to a multiple of downsample)
-    lr: float = 2e-4  #: peak AdamW learning rate
+    lr: float = 3e-4  #: peak AdamW learning rate
     weight_decay: float = 0.0
-    warmup_steps: int = 500  #: linear warm-up, then cosine decay to lr_min_ratio * lr
+    warmup_steps: int = 300  #: linear warm-up, then cosine decay to lr_min_ratio * lr
     lr_min_ratio: float = 0.05
     grad_clip: float = 1.0  #: max global gradient norm (0 = off)
     epochs: int = 100  #: used when steps is 0
-    steps: int = 0  #: total optimiser steps (overrides epochs when > 0)
-    steps_per_epoch: int = 0  #: 0 = ceil(train clips / batch_size)
-    checkpoint_every: int = 1000  #: steps between checkpoints (also at each epoch end)
+    steps: int = 5000  #: total optimiser steps (overrides epochs when > 0; 0 = use epochs)
+    steps_per_epoch: int = 500  #: steps between validations (0 = ceil(train clips / batch_size))
+    checkpoint_every: int = 500  #: steps between checkpoints (also at each epoch end)
     val_clips: int = 64  #: validation windows decoded each epoch (fixed, seeded)
     val_sample_steps: int = 10  #: DDIM steps for the validation decode
     device: str = "cpu"

@@ -1,0 +1,78 @@
+"""Rebuild the README gallery: run the pipeline for a few prompts, shrink each video to a GIF.
+
+Usage::
+
+    python examples/make_gallery.py [--out out/gallery] [--dest docs/gallery] [--robot op3_like]
+
+Each prompt goes through ``motok-robot run`` (default models, seed 0, 6 s) into ``OUT/NAME``;
+its ``video.mp4`` (reference motion | physics rollout, failing frames marked red) is
+resampled to ``--fps`` and ``--width`` and written to ``DEST/NAME.gif``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+PROMPTS = {
+    "wave_right_hand": "a person waves the right hand",
+    "raise_both_hands": "a person raises both hands",
+    "bow": "a person bows",
+    "walk_forward": "a person walks forward",
+}
+
+
+def video_to_gif(video: Path, gif: Path, fps: float, width: int) -> Path:
+    """Resample ``video`` to ``fps`` frames per second and ``width`` pixels wide, as a looping GIF."""
+    import imageio.v2 as imageio
+    from PIL import Image
+
+    reader = imageio.get_reader(str(video))
+    source_fps = float(reader.get_meta_data().get("fps", 30.0))
+    every = max(1, int(round(source_fps / fps)))
+    frames = []
+    for i, frame in enumerate(reader):
+        if i % every:
+            continue
+        image = Image.fromarray(frame)
+        height = int(round(image.height * width / image.width))
+        frames.append(np.asarray(image.resize((width, height), Image.Resampling.LANCZOS)))
+    reader.close()
+    if not frames:
+        raise SystemExit(f"{video}: no frames")
+    gif.parent.mkdir(parents=True, exist_ok=True)
+    imageio.mimsave(str(gif), frames, duration=1000.0 * every / source_fps, loop=0)
+    return gif
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=Path("out/gallery"))
+    parser.add_argument("--dest", type=Path, default=Path("docs/gallery"))
+    parser.add_argument("--robot", default="op3_like")
+    parser.add_argument("--seconds", type=float, default=6.0)
+    parser.add_argument("--fps", type=float, default=10.0)
+    parser.add_argument("--width", type=int, default=480)
+    parser.add_argument("--only", nargs="+", default=None, choices=sorted(PROMPTS))
+    args = parser.parse_args(argv)
+    for name in args.only or PROMPTS:
+        run_dir = args.out / name
+        cmd = ["motok-robot", "run", PROMPTS[name], "--robot", args.robot, "--seconds", str(args.seconds),
+               "--out", str(run_dir), "--overwrite"]
+        print("$", " ".join(cmd), flush=True)
+        # a failing validation exits non-zero but still writes the video: that is gallery material too
+        subprocess.run(cmd, check=False)
+        video = run_dir / "video.mp4"
+        if not video.is_file():
+            print(f"{name}: no video written (see {run_dir}.failed/FAILED.txt)", file=sys.stderr)
+            return 1
+        print("wrote", video_to_gif(video, args.dest / f"{name}.gif", args.fps, args.width))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
