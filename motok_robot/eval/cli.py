@@ -29,7 +29,7 @@ def register(commands, groups) -> None:
     )
     train.add_argument("--data", required=True, type=Path, help="prepared dataset directory (motok-robot data prepare)")
     train.add_argument("--out", type=Path, default=None, help="run directory (default models/evaluator)")
-    train.add_argument("--steps", type=int, default=None, help="optimiser steps in total (default 6000)")
+    train.add_argument("--steps", type=int, default=None, help="optimiser steps in total (default 3000)")
     train.add_argument("--batch-size", type=int, default=None, help="pairs per batch (default 64)")
     train.add_argument("--eval-every", type=int, default=None, help="steps between validations/checkpoints (default 500)")
     train.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")

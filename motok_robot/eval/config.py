@@ -39,7 +39,7 @@ class EvaluatorConfig:
     batch_size: int = 64
     lr: float = 3e-4
     weight_decay: float = 1e-4
-    steps: int = 6000
+    steps: int = 3000
     eval_every: int = 500
     seed: int = 0
 
