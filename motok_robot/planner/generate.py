@@ -278,8 +278,13 @@ _GENERATORS: dict[tuple, MotionGenerator] = {}
 
 
 def load_generator(planner: str = "masked", tokenizer_run=None, planner_run=None, device: str = "cpu") -> MotionGenerator:
-    """A :class:`MotionGenerator`, reused per process for the same arguments."""
-    key = (planner, str(tokenizer_run), str(planner_run), str(device))
+    """A :class:`MotionGenerator`, reused per process for the same model files and device.
+
+    The key holds the resolved run directories, so changing ``$MOTOK_ROBOT_MODELS`` between
+    calls loads the models it points to instead of reusing the previous ones."""
+    tok_path = Path(tokenizer_run) if tokenizer_run else default_run("tokenizer")
+    plan_path = Path(planner_run) if planner_run else default_run(planner)
+    key = (planner, str(tok_path.resolve()), str(plan_path.resolve()), str(device))
     if key not in _GENERATORS:
         _GENERATORS[key] = MotionGenerator(planner, tokenizer_run, planner_run, device)
     return _GENERATORS[key]
