@@ -55,8 +55,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--dest", type=Path, default=Path("docs/gallery"))
     parser.add_argument("--robot", default="op3_like")
     parser.add_argument("--seconds", type=float, default=6.0)
-    parser.add_argument("--fps", type=float, default=10.0)
-    parser.add_argument("--width", type=int, default=480)
+    parser.add_argument("--fps", type=float, default=6.0)
+    parser.add_argument("--width", type=int, default=320)
     parser.add_argument("--only", nargs="+", default=None, choices=sorted(PROMPTS))
     args = parser.parse_args(argv)
     for name in args.only or PROMPTS:
