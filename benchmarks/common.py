@@ -238,9 +238,8 @@ def random_model_runs(kind: str, root: Path) -> tuple[Path, Path]:
     ``root/tokenizer`` and ``root/planner``; returns those two run directories. Imports torch."""
     import torch
 
-    from motok_robot.planner.checkpoint import build_planner, save_planner_weights, write_run_config
+    from motok_robot.planner.checkpoint import build_planner, save_planner_weights, tokenizer_record, write_run_config
     from motok_robot.planner.config import PlannerConfig
-    from motok_robot.planner.data import file_digest
     from motok_robot.tokenizer import MoTok, TokenizerConfig, save_tokenizer
 
     torch.manual_seed(0)
@@ -248,7 +247,7 @@ def random_model_runs(kind: str, root: Path) -> tuple[Path, Path]:
     save_tokenizer(tok, root / "tokenizer")
     cfg = PlannerConfig(kind=kind, codebook_size=tok.config.codebook_size, downsample=tok.frames_per_token)
     planner = build_planner(cfg)
-    write_run_config(root / "planner", cfg, {"tokenizer": {"sha256": file_digest(root / "tokenizer" / "model.safetensors")}})
+    write_run_config(root / "planner", cfg, {"tokenizer": tokenizer_record(root / "tokenizer", tok)})
     save_planner_weights(planner, root / "planner")
     return root / "tokenizer", root / "planner"
 

@@ -252,3 +252,39 @@ def test_token_cache_is_reused_and_keyed(runs):
     assert set(tokens) == set(dataset.clip_ids) and all(t.dtype == np.int64 for t in tokens.values())
     with pytest.raises(AssertionError, match="re-tokenised"):
         tokenise_split(dataset, NoEncode(), cache, key + "|other tokenizer")
+
+
+def test_planner_follows_its_tokens_not_the_decoder_weights(runs, tmp_path):
+    """A decoder fine-tuned with --freeze-tokens serves the planner; a tokenizer with other tokens,
+    or another weights file under a record that only knows the file's sha256, is refused."""
+    import shutil
+
+    from motok_robot.errors import InputError
+    from motok_robot.planner.generate import MotionGenerator
+
+    recorded = json.loads((runs / "masked" / "config.json").read_text())["tokenizer"]
+    assert set(recorded) == {"path", "sha256", "tokens_sha256"}
+    ft = tmp_path / "tok_ft"
+    assert main(["train", "tokenizer", "--data", str(runs / "data"), "--out", str(ft), "--init-from", str(runs / "tok"),
+                 "--freeze-tokens", "--steps", "2", "--batch-size", "2"]) == 0
+    gen = MotionGenerator("masked", tokenizer_run=ft, planner_run=runs / "masked")
+    assert gen.tokenizer.tokens_digest() == recorded["tokens_sha256"]
+    motion = gen.generate("a person walks forward", seconds=1.0, seed=0)
+    assert np.isfinite(motion.joints).all()
+
+    other = tmp_path / "tok_other"
+    from motok_robot.tokenizer import MoTok, load_tokenizer, save_tokenizer
+
+    torch.manual_seed(5)
+    save_tokenizer(MoTok(load_tokenizer(runs / "tok", device="cpu").config), other)
+    with pytest.raises(InputError, match="trained with another tokenizer: its tokens differ"):
+        MotionGenerator("masked", tokenizer_run=other, planner_run=runs / "masked")
+
+    old_style = tmp_path / "old_planner"
+    shutil.copytree(runs / "masked", old_style, ignore=shutil.ignore_patterns("cache"))
+    data = json.loads((old_style / "config.json").read_text())
+    del data["tokenizer"]["tokens_sha256"]
+    (old_style / "config.json").write_text(json.dumps(data))
+    MotionGenerator("masked", tokenizer_run=runs / "tok", planner_run=old_style)
+    with pytest.raises(InputError, match="weights sha256"):
+        MotionGenerator("masked", tokenizer_run=ft, planner_run=old_style)

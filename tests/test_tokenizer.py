@@ -305,3 +305,51 @@ def test_window_sampler_pads_short_clips_and_weights_by_length():
     assert torch.equal(x[is_short][:, 10:], x[is_short][:, 9:10].expand(-1, 22, -1))  # last frame repeated
     # drawn in proportion to max(frames, window): 32 : 100
     assert abs(float(is_short.float().mean()) - 32 / 132) < 0.06
+
+
+def test_decoder_finetune_keeps_every_token(tmp_path):
+    """--init-from RUN --freeze-tokens: the decoder side trains, the encoder and codebook do not,
+    so every clip keeps its tokens (and the token digest) while its reconstruction changes."""
+    train, val = _clips(4, 40, 0), _clips(2, 40, 10)
+    flat = np.concatenate(train.features)
+    mean, std = flat.mean(0), flat.std(0)
+    base_cfg = TrainConfig(seed=3, batch_size=2, window=16, lr=1e-3, warmup_steps=2, steps=4, steps_per_epoch=2,
+                           checkpoint_every=100, val_clips=2, val_sample_steps=2)
+    train_tokenizer(train, val, mean, std, tmp_path / "base", TokenizerConfig(**TINY), base_cfg, progress=False)
+    # other statistics on purpose: the source's normalisation must win, or the tokens would move
+    ft_cfg = TrainConfig(**{**base_cfg.__dict__, "init_from": str(tmp_path / "base"), "freeze_tokens": True, "steps": 6})
+    train_tokenizer(train, val, mean + 1.0, std * 2.0, tmp_path / "ft", None, ft_cfg, progress=False, stop_at=3)
+    train_tokenizer(train, val, mean, std, tmp_path / "ft", resume=True, progress=False)  # stays frozen on resume
+    base, ft = load_tokenizer(tmp_path / "base", device="cpu"), load_tokenizer(tmp_path / "ft", device="cpu")
+    assert json.loads((tmp_path / "ft" / "config.json").read_text())["tokenizer"] == json.loads(
+        (tmp_path / "base" / "config.json").read_text())["tokenizer"]
+    a, b = base.state_dict(), ft.state_dict()
+    frozen = set(base.token_tensors())
+    assert frozen >= {"mean", "std", "quantizer.codebook"} and any(k.startswith("encoder.") for k in frozen)
+    for key in frozen | {"quantizer.ema_count", "quantizer.ema_sum"}:
+        assert torch.equal(a[key], b[key]), key
+    changed = [k for k in a if k.startswith(("cond_decoder.", "denoiser.")) and not torch.equal(a[k], b[k])]
+    assert changed, "the decoder side did not train"
+    assert base.tokens_digest() == ft.tokens_digest()
+    x = torch.from_numpy(np.stack([c[:40] for c in val.features]))
+    assert torch.equal(base.encode(x), ft.encode(x))
+    assert not torch.allclose(base.decode(base.encode(x), length=40, seed=0), ft.decode(ft.encode(x), length=40, seed=0))
+    # a tokenizer trained on its own gets another digest
+    other = TrainConfig(**{**base_cfg.__dict__, "seed": 4})
+    train_tokenizer(train, val, mean, std, tmp_path / "other", TokenizerConfig(**TINY), other, progress=False)
+    assert load_tokenizer(tmp_path / "other", device="cpu").tokens_digest() != base.tokens_digest()
+
+
+def test_decoder_finetune_errors(tmp_path):
+    train = _clips(2, 40, 0)
+    flat = np.concatenate(train.features)
+    with pytest.raises(InputError, match="freeze_tokens needs init_from"):
+        TrainConfig(freeze_tokens=True)
+    cfg = TrainConfig(steps=1, batch_size=2, window=16, init_from=str(tmp_path / "missing"), freeze_tokens=True)
+    with pytest.raises(InputError, match="not a tokenizer run"):
+        train_tokenizer(train, None, flat.mean(0), flat.std(0), tmp_path / "ft", None, cfg, progress=False)
+    save_tokenizer(tiny(), tmp_path / "src")
+    cfg = TrainConfig(steps=1, batch_size=2, window=16, init_from=str(tmp_path / "src"))
+    with pytest.raises(InputError, match="keeps its architecture"):
+        train_tokenizer(train, None, flat.mean(0), flat.std(0), tmp_path / "ft", TokenizerConfig(**{**TINY, "width": 64}),
+                        cfg, progress=False)

@@ -3,7 +3,7 @@
 ::
 
     RUN/config.json              {"format": "motok-planner", "version": 1, "planner": {...},
-                                  "train": {...}, "tokenizer": {"path": ..., "sha256": ...},
+                                  "train": {...}, "tokenizer": {"path": ..., "sha256": ..., "tokens_sha256": ...},
                                   "text_encoder": "<encoder name>"}
     RUN/model.safetensors        weights for generation (written at every validation)
     RUN/checkpoint.safetensors   weights + optimiser state + step (resuming)
@@ -73,3 +73,35 @@ def load_planner(run_dir: str | Path, device: str | torch.device = "cpu") -> tup
     model = build_planner(config)
     load_checked_weights(model, weights)
     return model.to(device).eval(), data
+
+
+# -- which tokenizer a planner belongs to -----------------------------------------------------
+def tokenizer_record(tokenizer_dir: str | Path, tokenizer) -> dict[str, str]:
+    """What a planner run stores about its tokenizer: the path (provenance), the SHA-256 of its
+    weights file, and ``tokens_sha256``, the digest of what decides the tokens (normalisation,
+    encoder, codebook; :meth:`MoTok.tokens_digest`).  A decoder trained further with
+    ``--freeze-tokens`` keeps ``tokens_sha256``, so the planner stays valid with it."""
+    from motok_robot.planner.data import file_digest
+
+    tokenizer_dir = Path(tokenizer_dir)
+    run = tokenizer_dir if tokenizer_dir.is_dir() else tokenizer_dir.parent
+    return {"path": str(run.resolve()), "sha256": file_digest(run / WEIGHTS_FILE), "tokens_sha256": tokenizer.tokens_digest()}
+
+
+def tokenizer_mismatch(saved: dict[str, Any], tokenizer_dir: str | Path, tokenizer) -> str | None:
+    """Why ``tokenizer`` (loaded from ``tokenizer_dir``) cannot serve a planner whose run config
+    holds ``saved`` as its tokenizer record, or None when it can.  Records with
+    ``tokens_sha256`` compare token digests; older ones (weights SHA-256 only) the weights file."""
+    if not saved:
+        return None
+    if saved.get("tokens_sha256"):
+        have = tokenizer.tokens_digest()
+        if have != saved["tokens_sha256"]:
+            return f"its tokens differ (token digest {saved['tokens_sha256']} expected, {tokenizer_dir} gives {have})"
+        return None
+    if saved.get("sha256"):
+        have = tokenizer_record(tokenizer_dir, tokenizer)["sha256"]
+        if have != saved["sha256"]:
+            return f"weights sha256 {saved['sha256']} expected, {tokenizer_dir} has {have}"
+    return None
+

@@ -103,7 +103,7 @@ class MotionGenerator:
 
     def __init__(self, planner: str = "masked", tokenizer_run: str | Path | None = None,
                  planner_run: str | Path | None = None, device: str = "cpu") -> None:
-        from motok_robot.planner.checkpoint import load_planner
+        from motok_robot.planner.checkpoint import load_planner, tokenizer_mismatch
         from motok_robot.planner.data import file_digest
         from motok_robot.text import load_text_encoder
         from motok_robot.tokenizer import load_tokenizer
@@ -123,14 +123,10 @@ class MotionGenerator:
         self.device = torch.device(device)
         self.tokenizer = load_tokenizer(tok_path, device=self.device)
         self.planner, run = load_planner(plan_path, device=self.device)
-        tok_file = (tok_path if tok_path.is_dir() else tok_path.parent) / "model.safetensors"
-        tok_hash = file_digest(tok_file)
-        expected = run.get("tokenizer", {}).get("sha256")
-        if expected and expected != tok_hash:
-            raise InputError(
-                f"planner {plan_path} was trained with another tokenizer (sha256 {expected}, "
-                f"{tok_file} has {tok_hash}); pass the matching --tokenizer or retrain the planner"
-            )
+        mismatch = tokenizer_mismatch(run.get("tokenizer") or {}, tok_path, self.tokenizer)
+        if mismatch:
+            raise InputError(f"planner {plan_path} was trained with another tokenizer: {mismatch}; "
+                             "pass the matching --tokenizer or retrain the planner")
         cfg = self.planner.config
         if cfg.codebook_size != self.tokenizer.config.codebook_size or cfg.downsample != self.tokenizer.frames_per_token:
             raise InputError(f"planner {plan_path} (K={cfg.codebook_size}, downsample={cfg.downsample}) does not match "
@@ -141,6 +137,7 @@ class MotionGenerator:
             raise InputError(f"text encoder {cfg.text_encoder!r} gives {self.text_encoder.dim}-d embeddings, "
                              f"the planner expects {cfg.text_dim}")
         self.kind = cfg.kind
+        tok_hash = file_digest((tok_path if tok_path.is_dir() else tok_path.parent) / "model.safetensors")
         self.model_id = (f"tokenizer={tok_path.name}@{tok_hash[:12]};"
                          f"planner={cfg.kind}:{plan_path.name}@{file_digest(plan_path / 'model.safetensors')[:12]};"
                          f"text={self.text_encoder.name}")

@@ -22,12 +22,13 @@ from tqdm import tqdm
 from motok_robot.checkpoint import load_training_state, save_training_state
 from motok_robot.errors import InputError
 from motok_robot.planner.checkpoint import (
-    CONFIG_FILE, atomic_write_text, build_planner, read_run_config, save_planner_weights, write_run_config,
+    CONFIG_FILE, atomic_write_text, build_planner, read_run_config, save_planner_weights, tokenizer_mismatch,
+    tokenizer_record, write_run_config,
 )
 from motok_robot.planner.config import (
     PlannerConfig, PlannerTrainConfig, planner_config_from_dict, to_dict, train_config_from_dict,
 )
-from motok_robot.planner.data import PlannerData, action_labels_of, file_digest, load_planner_data
+from motok_robot.planner.data import PlannerData, action_labels_of, load_planner_data
 
 CHECKPOINT_FILE = "checkpoint.safetensors"
 STATE_FILE = "train_state.json"
@@ -123,10 +124,11 @@ def train_planner(
 
     tok_dir = Path(tokenizer_run)
     tokenizer = load_tokenizer(tok_dir, device=dev)
-    tok_weights = (tok_dir if tok_dir.is_dir() else tok_dir.parent) / "model.safetensors"
-    tokenizer_key = file_digest(tok_weights)
-    if resume and saved.get("tokenizer", {}).get("sha256") not in (None, tokenizer_key):
-        raise InputError(f"--resume: tokenizer {tok_weights} differs from the one this run was trained with")
+    record = tokenizer_record(tok_dir, tokenizer)
+    tokenizer_key = record["tokens_sha256"]
+    mismatch = tokenizer_mismatch(saved.get("tokenizer") or {}, tok_dir, tokenizer) if resume else None
+    if mismatch:
+        raise InputError(f"--resume: tokenizer {tok_dir} is not the one this run was trained with: {mismatch}")
     encoder = load_text_encoder(config.text_encoder)
     if not resume:
         config = replace(config, codebook_size=tokenizer.config.codebook_size, downsample=tokenizer.frames_per_token,
@@ -134,7 +136,7 @@ def train_planner(
                          action_labels=action_labels_of(data_dir, "train"))
         config.validate()
     extra = {"train": to_dict(train_cfg),
-             "tokenizer": {"path": str(tok_dir.resolve()), "sha256": tokenizer_key},
+             "tokenizer": record,
              "text_encoder": encoder.name, "data": str(Path(data_dir).resolve())}
     write_run_config(out, config, extra)
 

@@ -38,6 +38,11 @@ def register(commands, groups) -> None:
     train.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
     train.add_argument("--device", default=None, help="cpu or cuda (default cpu)")
     train.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's)")
+    train.add_argument("--init-from", type=Path, default=None,
+                       help="start from the weights (and architecture) of this tokenizer run")
+    train.add_argument("--freeze-tokens", action="store_true",
+                       help="with --init-from: train only the decoder side; encoder and codebook stay fixed, so "
+                       "every clip keeps its tokens and planners trained on them stay valid")
     train.set_defaults(func=_train)
 
     rec = groups["eval"].add_parser(
@@ -69,6 +74,12 @@ def _train(args) -> int:
             train_section[key] = value
     if args.epochs is not None and args.steps is None:
         train_section["steps"] = 0  # the epoch count decides the length
+    if args.init_from is not None:
+        train_section["init_from"] = str(args.init_from)
+    if args.freeze_tokens:
+        train_section["freeze_tokens"] = True
+    if args.resume and ("init_from" in train_section or "freeze_tokens" in train_section):
+        raise InputError("--resume continues with the run's own config.json; drop --init-from / --freeze-tokens")
     where = str(args.config) if args.config else "defaults"
     tok_cfg = tokenizer_config_from_dict(tok_section, where=f"{where} 'tokenizer'")
     train_cfg = train_config_from_dict(train_section, where=f"{where} 'train'")
@@ -86,7 +97,7 @@ def _train(args) -> int:
     overrides = {key: train_section[key] for key in ("steps", "epochs", "device", "num_threads") if key in train_section}
     summary = train_tokenizer(
         train_clips, val_clips if val_clips.ids else None, mean, std, args.out,
-        tok_cfg, train_cfg, resume=args.resume, overrides=overrides if args.resume else None,
+        tok_cfg if tok_section else None, train_cfg, resume=args.resume, overrides=overrides if args.resume else None,
     )
     last = summary.get("last") or {}
     print(json.dumps({k: v for k, v in summary.items() if k != "last"}))

@@ -119,8 +119,16 @@ class TrainConfig:
     val_sample_steps: int = 10  #: DDIM steps for the validation decode
     device: str = "cpu"
     num_threads: int = 0  #: torch CPU threads (0 = torch default)
+    #: tokenizer run whose weights (and architecture) start this run ("" = random initialisation)
+    init_from: str = ""
+    #: keep the encoder, codebook and normalisation of ``init_from`` fixed and train only the
+    #: decoder side (conditioning decoder + denoiser): every clip keeps its tokens, so planners
+    #: trained on the ``init_from`` tokens stay valid with the new decoder
+    freeze_tokens: bool = False
 
     def validate(self) -> None:
+        if self.freeze_tokens and not self.init_from:
+            raise InputError("train config: freeze_tokens needs init_from (the run whose tokens to keep)")
         for name in ("batch_size", "window"):
             if int(getattr(self, name)) < 1:
                 raise InputError(f"train config: {name} must be >= 1 (got {getattr(self, name)})")

@@ -14,6 +14,8 @@ Model space = normalised features ``(x - mean) / std``, times the emphasis proje
 
 from __future__ import annotations
 
+import hashlib
+import json
 from typing import Any
 
 import numpy as np
@@ -111,6 +113,40 @@ class MoTok(nn.Module):
     def codebook(self) -> torch.Tensor:
         """``[K, code_dim]`` codebook vectors (read-only view)."""
         return self.quantizer.codebook
+
+    # -- the token vocabulary -------------------------------------------------------------
+    #: configuration fields that decide which token a motion gets (with the tensors below)
+    TOKEN_FIELDS = ("feature_dim", "downsample", "codebook_size", "code_dim", "width", "depth", "kernel_size")
+
+    def token_tensors(self) -> dict[str, torch.Tensor]:
+        """The tensors that decide ``encode``: normalisation, encoder weights and codebook."""
+        state = self.state_dict()
+        return {k: v for k, v in state.items() if k in ("mean", "std", "quantizer.codebook") or k.startswith("encoder.")}
+
+    def tokens_digest(self) -> str:
+        """SHA-256 (first 16 hex digits) of what decides the tokens (:meth:`token_tensors` and
+        :data:`TOKEN_FIELDS`): equal digests give equal ``encode`` results, whatever the decoder."""
+        h = hashlib.sha256()
+        h.update(json.dumps({k: getattr(self.config, k) for k in self.TOKEN_FIELDS}, sort_keys=True).encode())
+        for name, tensor in sorted(self.token_tensors().items()):
+            h.update(name.encode())
+            h.update(str(tuple(tensor.shape)).encode())
+            h.update(tensor.detach().to("cpu", torch.float32).contiguous().numpy().tobytes())
+        return h.hexdigest()[:16]
+
+    def freeze_tokens(self) -> None:
+        """Fix the encoder and the codebook (no gradients, no EMA updates or restarts, also in
+        training mode); only the decoder side stays trainable."""
+        self.encoder.requires_grad_(False)
+        self._tokens_frozen = True
+        self.train(self.training)
+
+    def train(self, mode: bool = True) -> "MoTok":
+        super().train(mode)
+        if getattr(self, "_tokens_frozen", False):
+            self.encoder.eval()
+            self.quantizer.eval()
+        return self
 
     # -- spaces ---------------------------------------------------------------------------
     def normalise(self, x: torch.Tensor) -> torch.Tensor:

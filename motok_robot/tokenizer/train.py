@@ -226,6 +226,16 @@ def train_tokenizer(
         cfg = train_config_from_dict(saved_train, where=f"{out / CONFIG_FILE} 'train'")
     elif (out / WEIGHTS_FILE).exists() or state_path.exists():
         raise InputError(f"{out}: already holds a tokenizer run; pass --resume to continue it or choose a new --out")
+    initial = None
+    if cfg.init_from and not resume:
+        source = Path(cfg.init_from)
+        if not (source / WEIGHTS_FILE).is_file():
+            raise InputError(f"init_from: {source} is not a tokenizer run (no {WEIGHTS_FILE})")
+        source_cfg = tokenizer_config_from_dict(read_run_config(source)["tokenizer"], where=f"{source / CONFIG_FILE} 'tokenizer'")
+        if tokenizer_config is not None and to_dict(tokenizer_config) != to_dict(source_cfg):
+            raise InputError(f"init_from: the tokenizer config given differs from {source / CONFIG_FILE}; "
+                             "a run started from another keeps its architecture (drop the 'tokenizer' section)")
+        tok_cfg, initial = source_cfg, load_file(str(source / WEIGHTS_FILE))
     out.mkdir(parents=True, exist_ok=True)
     if cfg.num_threads:
         torch.set_num_threads(cfg.num_threads)
@@ -241,8 +251,14 @@ def train_tokenizer(
     total = cfg.steps if cfg.steps > 0 else cfg.epochs * steps_per_epoch
 
     torch.manual_seed(cfg.seed)
-    model = MoTok(tok_cfg, mean, std).to(device)
-    optimizer = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    model = MoTok(tok_cfg, mean, std)
+    if initial is not None:
+        model.load_state_dict(initial)  # normalisation included: the source's mean/std win
+    model = model.to(device)
+    if cfg.freeze_tokens:
+        model.freeze_tokens()
+    trainable = [p for p in model.parameters() if p.requires_grad]
+    optimizer = torch.optim.AdamW(trainable, lr=cfg.lr, weight_decay=cfg.weight_decay)
     generator = torch.Generator().manual_seed(cfg.seed)
     step, running = 0, {k: 0.0 for k in _RUNNING}
     running_n = 0
@@ -291,7 +307,7 @@ def train_tokenizer(
         optimizer.zero_grad(set_to_none=True)
         losses["loss"].backward()
         if cfg.grad_clip > 0:
-            torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+            torch.nn.utils.clip_grad_norm_(trainable, cfg.grad_clip)
         optimizer.step()
         step += 1
         for key in _RUNNING:
