@@ -288,3 +288,36 @@ def test_planner_follows_its_tokens_not_the_decoder_weights(runs, tmp_path):
     MotionGenerator("masked", tokenizer_run=runs / "tok", planner_run=old_style)
     with pytest.raises(InputError, match="weights sha256"):
         MotionGenerator("masked", tokenizer_run=ft, planner_run=old_style)
+
+
+def test_keep_best_keeps_the_lowest_val_loss_weights(runs, tmp_path, monkeypatch):
+    """model.safetensors holds the weights of the best validation, also across a resume; the
+    resume checkpoint holds the latest. Val losses are scripted (3.0, 2.0 | resume | 2.5, 1.5, 2.2)."""
+    from safetensors.torch import load_file
+
+    import motok_robot.planner.train as planner_train
+
+    scripted = iter([3.0, 2.0, 2.5, 1.5, 2.2])
+    real_evaluate = planner_train.evaluate
+    monkeypatch.setattr(planner_train, "evaluate", lambda *a, **k: {**real_evaluate(*a, **k), "val_loss": next(scripted)})
+
+    def weights(out, name):
+        flat = load_file(str(out / name))
+        return {k.removeprefix("model."): v for k, v in flat.items() if name == "model.safetensors" or k.startswith("model.")}
+
+    out = tmp_path / "ar"
+    common = ["train", "planner", "--data", str(runs / "data"), "--tokenizer", str(runs / "tok"), "--kind", "ar",
+              "--out", str(out), "--val-every", "2", "--seed", "1"]
+    assert main(common + ["--steps", "4", "--config", str(runs / "tiny.json")]) == 0
+    at_step_4 = weights(out, "checkpoint.safetensors")
+    assert all(torch.equal(at_step_4[k], v) for k, v in weights(out, "model.safetensors").items())
+    assert planner_train._best_val_loss(out / "metrics.csv", 4) == 2.0
+    assert main(common + ["--steps", "6", "--resume"]) == 0  # 2.5: worse than 2.0, kept weights stay
+    kept = weights(out, "model.safetensors")
+    assert all(torch.equal(at_step_4[k], v) for k, v in kept.items())
+    assert not all(torch.equal(at_step_4[k], v) for k, v in weights(out, "checkpoint.safetensors").items())
+    assert main(common + ["--steps", "10", "--resume"]) == 0  # 1.5 at step 8 is kept, 2.2 at step 10 is not
+    assert [float(r["val_loss"]) for r in _metrics(out)] == [3.0, 2.0, 2.5, 1.5, 2.2]
+    latest, kept = weights(out, "checkpoint.safetensors"), weights(out, "model.safetensors")
+    assert not all(torch.equal(latest[k], v) for k, v in kept.items())
+    assert not all(torch.equal(at_step_4[k], v) for k, v in kept.items())

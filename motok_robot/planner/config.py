@@ -103,6 +103,10 @@ class PlannerTrainConfig:
     action_prob: float = 0.2  #: clips with both texts and an action label train the action path this often
     length_loss_weight: float = 0.1  #: weight of the length estimator's loss
     val_every: int = 500  #: steps between validation + checkpoint
+    #: model.safetensors keeps the weights of the validation with the lowest val loss (early
+    #: stopping: the AR planner overfits); False = the latest weights. Resuming always continues
+    #: from the latest state (checkpoint.safetensors)
+    keep_best: bool = True
     val_batches: int = 20
     device: str = "cpu"
     control: ControlConfig = field(default_factory=ControlConfig)

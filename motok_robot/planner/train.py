@@ -172,6 +172,7 @@ def train_planner(
     if not metrics_path.is_file():
         with open(metrics_path, "w", newline="") as fh:
             csv.writer(fh).writerow(METRIC_FIELDS)
+    best_loss = _best_val_loss(metrics_path, step) if resume else float("inf")
 
     model.train()
     t0 = time.time()
@@ -209,10 +210,22 @@ def train_planner(
             with open(metrics_path, "a", newline="") as fh:
                 csv.writer(fh).writerow([f"{row[k]:.6g}" if isinstance(row[k], float) else row[k] for k in METRIC_FIELDS])
             running_loss, running_acc, running_n = 0.0, 0.0, 0
-            save_planner_weights(model, out)
+            improved = metrics["val_loss"] < best_loss
+            if improved or not train_cfg.keep_best:
+                save_planner_weights(model, out)
+            best_loss = min(best_loss, metrics["val_loss"])
             save_training_state(ckpt, model, optimiser, step, extra={"torch_rng": generator.get_state(),
                                                                            "global_rng": torch.get_rng_state()})
             atomic_write_text(out / STATE_FILE, json.dumps({"numpy_rng": rng.bit_generator.state, "step": step}))
-            bar.write(f"step {step}: val loss {metrics['val_loss']:.4f}, token accuracy {metrics['val_accuracy']:.3f}")
+            kept = " (kept in model.safetensors)" if improved and train_cfg.keep_best else ""
+            bar.write(f"step {step}: val loss {metrics['val_loss']:.4f}, token accuracy {metrics['val_accuracy']:.3f}{kept}")
     bar.close()
     return out
+
+
+def _best_val_loss(metrics_path: Path, step: int) -> float:
+    """Lowest val loss logged up to ``step`` (inf when none): where a resumed run's
+    ``keep_best`` continues from."""
+    with open(metrics_path, newline="") as fh:
+        losses = [float(r["val_loss"]) for r in csv.DictReader(fh) if r.get("val_loss") and int(float(r["step"])) <= step]
+    return min(losses, default=float("inf"))
