@@ -624,7 +624,7 @@ class Pipeline:
         t = time.perf_counter()
         from motok_robot.sim.report import write_report
         from motok_robot.sim.trajectory import load_robot_npz
-        from motok_robot.sim.validate import validate_trajectory
+        from motok_robot.sim.validate import validate_trajectory, write_servo_goals
 
         trajectory = load_robot_npz(files["robot"], entry["robot"])
         trajectory.source = "robot.npz"
@@ -651,6 +651,9 @@ class Pipeline:
             timings["render"] = time.perf_counter() - t
         report.setdefault("timing_s", {}).update(
             {k: timings[k] for k in ("plots", "render") if k in timings})
+        goals_path = write_servo_goals(validation, tmp)
+        if goals_path is not None:
+            files["servo_goals"] = goals_path
         files["report"] = write_report(report, tmp / "report.json")
         bar.update()
 
@@ -723,7 +726,7 @@ class Pipeline:
             warnings.warn(f"playing on {port} WITHOUT a passing validation report ({gate}) because of --force",
                           PlaybackWarning, stacklevel=3)
         servo_map = ServoMap.from_specs(robot.servos)
-        trajectory = load_trajectory(files["robot"], servo_map, robot.name)
+        trajectory = load_trajectory(files["robot"], servo_map, robot.name, files["report"])
         defaults = self.config.playback or PlaybackConfig()
         rate = defaults.rate_hz
         if self.config.playback is None and robot.bus is not None:

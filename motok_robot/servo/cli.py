@@ -103,7 +103,7 @@ def _play_inner(args: argparse.Namespace) -> int:
     robot = load(robot_name)
     check_validation_report(path, args.report, force=args.force, robot_name=robot.name)
     servo_map = ServoMap.from_specs(robot.servos)
-    trajectory = load_trajectory(path, servo_map, robot.name)
+    trajectory = load_trajectory(path, servo_map, robot.name, args.report)
     bus_spec = robot.bus
     baud = args.baud or (bus_spec.baud if bus_spec else 2_000_000)
     defaults = PlaybackConfig()

@@ -5,7 +5,10 @@ Sequence (:func:`play_file`):
 1. **Report gate** (:func:`check_validation_report`): a ``report.json`` with ``"passed": true``
    (next to ``robot.npz`` or given explicitly) is required; ``force=True`` plays anyway and
    warns (:class:`PlaybackWarning`).
-2. **Load** (:func:`load_trajectory`): the joint columns of ``qpos`` in servo-map order.
+2. **Load** (:func:`load_trajectory`): the servo goals the report validated
+   (``servo_goals.npz``: the joint angles plus inverse-dynamics feedforward, see
+   :mod:`motok_robot.sim.feedforward`), or the joint columns of ``qpos`` when the report
+   records none; servo-map order.
 3. **Pre-flight** (:meth:`Streamer.preflight`): ping every ID, check model numbers and
    Hardware Error Status, set Return Delay Time, read present positions (each must lie in its
    limits), set Profile Velocity to the servo's velocity limit, write Goal = present, enable
@@ -74,23 +77,31 @@ class Trajectory:
         fps: frames per second of ``q``.
         joints: joint name of each column.
         source: the file it came from.
+        goals: what ``q`` holds: ``"reference"`` (the joint angles of ``qpos``) or
+            ``"feedforward"`` (the validated servo goals of ``servo_goals.npz``).
     """
 
     q: np.ndarray
     fps: float
     joints: tuple[str, ...]
     source: Path | None = None
+    goals: str = "reference"
 
     @property
     def duration_s(self) -> float:
         return (len(self.q) - 1) / self.fps
 
 
-def load_trajectory(path: str | Path, servo_map: ServoMap, robot_name: str | None = None) -> Trajectory:
+def load_trajectory(path: str | Path, servo_map: ServoMap, robot_name: str | None = None,
+                    report_path: str | Path | None = None) -> Trajectory:
     """Read ``robot.npz`` (CONTRACTS.md) and pick the servo joints' columns of ``qpos``.
 
     ``qpos`` is [T, nq] with the free base (7 values) first; the joint columns are the last
-    ``len(joint_names)``.  Raises InputError naming the file and field.
+    ``len(joint_names)``.  When the validation report (``report_path``, default ``report.json``
+    next to the file) validated this very file and records servo goals (``servo_goals``, the
+    feedforward goals its physics rollout tracked), those goals are played instead, read from
+    the ``servo_goals.npz`` it names and checked against its sha256: the servos get exactly
+    what was validated.  Raises InputError naming the file and field.
     """
     path = Path(path)
     if not path.is_file():
@@ -122,7 +133,45 @@ def load_trajectory(path: str | Path, servo_map: ServoMap, robot_name: str | Non
     if missing:
         raise InputError(f"{path}: joint_names lacks the servo joint(s) {', '.join(missing)}")
     columns = [offset + index[j] for j in servo_map.joints]
-    return Trajectory(q=qpos[:, columns].copy(), fps=fps, joints=servo_map.joints, source=path)
+    trajectory = Trajectory(q=qpos[:, columns].copy(), fps=fps, joints=servo_map.joints, source=path)
+    report_path = Path(report_path) if report_path is not None else path.with_name("report.json")
+    goals = _validated_goals(path, report_path)
+    if goals is not None:
+        if goals["goals"].shape[0] != qpos.shape[0] or abs(goals["fps"] - fps) > 1e-9:
+            raise InputError(f"{goals['path']}: {goals['goals'].shape[0]} frames at {goals['fps']} fps, "
+                             f"but {path} has {qpos.shape[0]} at {fps}")
+        where = {n: i for i, n in enumerate(goals["joint_names"])}
+        lacking = [j for j in servo_map.joints if j not in where]
+        if lacking:
+            raise InputError(f"{goals['path']}: joint_names lacks the servo joint(s) {', '.join(lacking)}")
+        trajectory.q = goals["goals"][:, [where[j] for j in servo_map.joints]].copy()
+        trajectory.goals = goals["mode"]
+    return trajectory
+
+
+def _validated_goals(path: Path, report_path: Path) -> dict | None:
+    """The servo goals a validation report recorded for ``path``, or None when there is no
+    readable report, it validated other content (the report gate deals with that), or it
+    records no goals file.  A recorded file that is missing or altered is an InputError."""
+    from motok_robot.sim.feedforward import load_servo_goals
+
+    try:
+        report = json.loads(report_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    record = report.get("servo_goals") if isinstance(report, dict) else None
+    validated = report.get("input") if isinstance(report, dict) else None
+    digest = validated.get("sha256") if isinstance(validated, dict) else None
+    if not isinstance(record, dict) or not record.get("file") or not isinstance(digest, str):
+        return None
+    if _sha256(path) != digest.lower():
+        return None
+    goals_path = report_path.parent / str(record["file"])
+    goals = load_servo_goals(goals_path, expected_sha256=record.get("sha256"))
+    if goals["source_sha256"] and goals["source_sha256"] != digest.lower():
+        raise InputError(f"{goals_path}: computed for other content than {path} (source sha256 differs)")
+    goals["path"] = goals_path
+    return goals
 
 
 def check_validation_report(trajectory_path: str | Path, report_path: str | Path | None = None, *,
@@ -559,7 +608,7 @@ def play_file(trajectory_path: str | Path, robot, bus: ServoBus, *, config: Play
     """Gate on the validation report, load ``robot.npz`` for ``robot``, pre-flight and play."""
     check_validation_report(trajectory_path, report_path, force=force, robot_name=robot.name)
     servo_map = ServoMap.from_specs(robot.servos)
-    trajectory = load_trajectory(trajectory_path, servo_map, robot.name)
+    trajectory = load_trajectory(trajectory_path, servo_map, robot.name, report_path)
     streamer = Streamer(bus, servo_map, config, clock=clock, log_path=log_path, on_tick=on_tick)
     streamer.preflight()
     return streamer.play(trajectory)

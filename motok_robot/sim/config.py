@@ -114,6 +114,13 @@ class ValidationConfig:
     #: clean and fault clips give the same verdicts on both shipped robots at 2 and 4 ms (see
     #: docs/validation.md).  Set 0 for the model's own step.
     physics_timestep_s: float = 0.004
+    #: servo goals of the rollout (and of playback, which streams the validated goals):
+    #: True = inverse-dynamics feedforward, goal = reference + (required torque + servo
+    #: damping x velocity) / servo stiffness, clamped to the joint range and velocity limit
+    #: (:mod:`motok_robot.sim.feedforward`); False = the reference joint angles themselves.
+    #: A position servo only pushes once it lags, so plain reference goals make a compliant
+    #: servo robot sag and trail (walks fall open loop; docs/validation.md).
+    servo_feedforward: bool = True
     #: proportional gain (N m / rad per N m of force limit) of the software PD used only for
     #: robots whose actuators are plain motors (position servos track their own targets).
     motor_kp_per_nm: float = 10.0

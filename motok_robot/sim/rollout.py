@@ -2,8 +2,11 @@
 
 The robot starts at frame 0 (``qpos[0]``, base velocity and joint velocities from the
 reference's finite differences), with its free base, gravity and contacts, and its
-actuators receive the reference joint angles linearly interpolated from the clip's frame
+actuators receive the servo goals linearly interpolated from the clip's frame
 rate to the physics timestep (each step gets the target of the step's end time).
+
+Servo goals: the reference joint angles, or the feedforward goals of
+:mod:`motok_robot.sim.feedforward` (validation's default, which playback then streams).
 
 Servo model: the robot's own actuators.  Position actuators (affine bias with a negative
 position gain: MuJoCo ``<position>``) get the target angle as control (times the
@@ -96,8 +99,13 @@ def _up_axis(quat: np.ndarray) -> np.ndarray:
     return np.stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)], axis=1)
 
 
-def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: ValidationConfig) -> RolloutResult:
-    """Roll the robot out in physics tracking ``qpos`` [T, nq] (frames at ``fps``)."""
+def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: ValidationConfig,
+             goals: np.ndarray | None = None) -> RolloutResult:
+    """Roll the robot out in physics tracking ``qpos`` [T, nq] (frames at ``fps``).
+
+    ``goals`` [T, nj] (rad, robot joint order) are the servo goals when they differ from the
+    reference joint angles (feedforward, :mod:`motok_robot.sim.feedforward`); tracking error,
+    drift and falls are always measured against ``qpos``."""
     import time as _time
 
     start = _time.perf_counter()
@@ -115,7 +123,8 @@ def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: Validation
         j = index.actuator_joint[a]
         if j < 0:
             continue
-        target = np.interp(step_end, ref_time, qpos[:, index.qpos_adr[j]])
+        column = qpos[:, index.qpos_adr[j]] if goals is None else goals[:, j]
+        target = np.interp(step_end, ref_time, column)
         control[:, a] = gear[a] * target
 
     data = mujoco.MjData(model)

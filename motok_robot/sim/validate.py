@@ -12,12 +12,15 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from motok_robot import __version__
 from motok_robot.sim.config import ValidationConfig
 from motok_robot.sim.kinematic import KinematicResult, replay
 from motok_robot.sim.model_index import RobotIndex, index_robot
 from motok_robot.sim.report import SCHEMA, build_checks, summary_text, write_report
-from motok_robot.sim.rollout import RolloutResult, simulate
+from motok_robot.sim.feedforward import GOALS_FILE, feedforward_goals, goals_digest, save_servo_goals, servo_gains
+from motok_robot.sim.rollout import RolloutResult, servo_model, simulate
 from motok_robot.sim.trajectory import RobotTrajectory, check_matches_robot, load_robot_npz
 
 
@@ -29,6 +32,7 @@ class ValidationResult:
     kinematic: KinematicResult
     rollout: RolloutResult | None
     index: RobotIndex
+    goals: np.ndarray | None = None  # [T, nj] servo goals of the rollout (None without physics)
 
     @property
     def passed(self) -> bool:
@@ -44,35 +48,31 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
     """Validate ``trajectory`` on ``robot`` (a ``Robot`` or a prebuilt :class:`RobotIndex`).
 
     With ``out_dir``, writes ``report.json``, the PNG plots (``plots``) and ``validation.mp4``
-    (``render``) there.  ``input_sha256`` (the file's digest) is recorded in ``input`` so a
-    later stage can check that the file it plays is the one validated.  Raises :class:`~motok_robot.errors.InputError` when the trajectory does
-    not fit the robot.
+    (``render``) there.  With physics, the servo goals of the rollout (feedforward by default,
+    see :mod:`motok_robot.sim.feedforward`) are recorded in ``report["servo_goals"]`` and, with
+    ``out_dir``, written to ``servo_goals.npz``, which playback streams.  ``input_sha256`` (the
+    file's digest) is recorded in ``input`` so a later stage can check that the file it plays
+    is the one validated.  Raises :class:`~motok_robot.errors.InputError` when the trajectory
+    does not fit the robot.
     """
     config = config or ValidationConfig()
     index = robot if isinstance(robot, RobotIndex) else index_robot(robot)
     check_matches_robot(trajectory, _RobotView(index), where=trajectory.source or "trajectory")
     timing = {}
-    roll = None
+    roll = goals = None
+    start = time.perf_counter()
+    kin = replay(index, trajectory.qpos, trajectory.fps, config)
+    timing["kinematic"] = time.perf_counter() - start
     if physics:
-        # the rollout runs in C without the GIL (mujoco.rollout): overlap it with the replay
-        from concurrent.futures import ThreadPoolExecutor
-
-        def timed_simulate():
-            begin = time.perf_counter()
-            out = simulate(index, trajectory.qpos, trajectory.fps, config)
-            timing["physics"] = time.perf_counter() - begin
-            return out
-
-        with ThreadPoolExecutor(max_workers=1) as pool:
-            pending = pool.submit(timed_simulate)
-            start = time.perf_counter()
-            kin = replay(index, trajectory.qpos, trajectory.fps, config)
-            timing["kinematic"] = time.perf_counter() - start
-            roll = pending.result()
-    else:
         start = time.perf_counter()
-        kin = replay(index, trajectory.qpos, trajectory.fps, config)
-        timing["kinematic"] = time.perf_counter() - start
+        model, _ = servo_model(index, config)
+        if config.servo_feedforward:
+            stiffness, damping = servo_gains(model, index)
+            goals = feedforward_goals(index, kin.joint_pos, kin.joint_vel, kin.torque, trajectory.fps, stiffness, damping)
+        else:
+            goals = kin.joint_pos.copy()
+        roll = simulate(index, trajectory.qpos, trajectory.fps, config, goals=goals)
+        timing["physics"] = time.perf_counter() - start
     checks, metrics, per_foot, per_joint = build_checks(index, kin, roll, config, trajectory.contacts)
     report = {
         "schema": SCHEMA, "version": __version__, "passed": metrics["passed"],
@@ -82,8 +82,11 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
         "physics": physics, "metrics": metrics, "checks": {c.name: c.to_dict() for c in checks},
         "per_foot": per_foot, "per_joint": per_joint, "config": config.to_dict(), "timing_s": timing,
         "outputs": {"report": None, "plots": [], "video": None},
+        "servo_goals": None if goals is None else {
+            "mode": "feedforward" if config.servo_feedforward else "reference", "file": None,
+            "sha256": goals_digest(goals)},
     }
-    result = ValidationResult(report=report, kinematic=kin, rollout=roll, index=index)
+    result = ValidationResult(report=report, kinematic=kin, rollout=roll, index=index, goals=goals)
     if out_dir is not None:
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -99,6 +102,7 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
             start = time.perf_counter()
             report["outputs"]["video"] = str(render_video(result, trajectory, out_dir / "validation.mp4", config))
             timing["render"] = time.perf_counter() - start
+        write_servo_goals(result, out_dir)
         report["outputs"]["report"] = str(out_dir / "report.json")
         write_report(report, out_dir / "report.json")
     return result
@@ -113,6 +117,18 @@ def validate_file(path: str | Path, robot, config: ValidationConfig | None = Non
     trajectory = load_robot_npz(path, _RobotView(index))
     digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
     return validate_trajectory(trajectory, index, config, out_dir, physics, plots, render, input_sha256=digest)
+
+
+def write_servo_goals(result: ValidationResult, out_dir: str | Path) -> Path | None:
+    """Write the rollout's servo goals to ``out_dir/servo_goals.npz`` and name the file in
+    ``result.report["servo_goals"]`` (playback streams it); None without physics."""
+    if result.goals is None:
+        return None
+    report = result.report
+    path = save_servo_goals(Path(out_dir) / GOALS_FILE, result.goals, result.index.joint_names, report["input"]["fps"],
+                            result.index.name, report["servo_goals"]["mode"], report["input"]["sha256"])
+    report["servo_goals"]["file"] = GOALS_FILE
+    return path
 
 
 class _RobotView:

@@ -1,0 +1,138 @@
+"""Servo goals with inverse-dynamics feedforward, and the ``servo_goals.npz`` file.
+
+A position servo (a Dynamixel in position mode, MuJoCo's ``<position>`` actuator) produces
+
+    tau = k (goal - q) - k_d qdot          (k: stiffness, k_d: velocity damping of the servo)
+
+so a goal equal to the reference angle only produces torque once the joint *lags* the
+reference.  On a compliant servo (op3_like's XM430: k = 19 N m/rad) the stance leg sags
+and the swing leg trails by 10-30 degrees in a walk, and an open-loop replay falls although
+the motion itself needs no more torque than the servo has (docs/validation.md).
+
+Feedforward moves each goal by the torque the motion needs:
+
+    goal = q_ref + (tau_ref + k_d qdot_ref) / k
+
+where ``tau_ref`` is the required joint torque of the validator's inverse dynamics
+(:mod:`motok_robot.sim.dynamics`: ``mj_inverse`` with the ground reaction distributed over
+the soles in contact; it includes the joints' passive damping and armature) clipped to the
+actuator's force limit.  The goals are then clamped to the joint range and rate-limited to
+the servo velocity limit per frame (``velocity_limit / fps``), so that the playback
+streamer's own clamps (position limits, ``velocity_limit / rate`` per tick on the frames
+linearly interpolated to its rate) never change them: what the physics rollout tracked is
+exactly what the servos receive.  It is still open loop: no sensor is read, and a servo
+whose real stiffness differs from the robot description gets a proportionally wrong offset
+(calibrate ``kp`` in the MJCF to the servo's P gain).
+
+``servo_goals.npz`` (written by validation next to ``report.json``; docs/CONTRACTS.md)::
+
+    goals         float64 [T, nj]  servo goal angles (rad), robot joint order
+    joint_names   str [nj]
+    fps           float
+    robot         str
+    mode          str              "feedforward" (or "reference": goals = the joint angles)
+    source_sha256 str              sha256 of the robot.npz the goals were computed from
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+
+from motok_robot.errors import InputError
+
+GOALS_FILE = "servo_goals.npz"
+MODES = ("feedforward", "reference")
+
+
+def servo_gains(model, index) -> tuple[np.ndarray, np.ndarray]:
+    """Effective stiffness ``k`` (N m/rad) and damping ``k_d`` (N m s/rad) per joint [nj] of the
+    servo model the rollout uses (``model`` from :func:`motok_robot.sim.rollout.servo_model`).
+
+    For an actuator with gear ``g``, control ``g x goal`` and an affine bias, the joint torque
+    is ``g^2 (gain ctrl/g + bias1 q + bias2 qdot)``, so ``k = g^2 gain`` and ``k_d = -g^2 bias2``.
+    A joint without a position-type actuator gets ``k = 0`` (no feedforward is possible).
+    """
+    k = np.zeros(index.nj)
+    kd = np.zeros(index.nj)
+    for a in range(model.nu):
+        j = int(index.actuator_joint[a])
+        if j < 0:
+            continue
+        gear = float(model.actuator_gear[a, 0]) or 1.0
+        gain = float(model.actuator_gainprm[a, 0])
+        if gain <= 0 or abs(float(model.actuator_biasprm[a, 1]) + gain) > 1e-9 * max(gain, 1.0):
+            continue  # not a position servo (bias -gain x length)
+        k[j] = gear * gear * gain
+        kd[j] = -gear * gear * float(model.actuator_biasprm[a, 2])
+    return k, kd
+
+
+def feedforward_goals(index, joint_pos: np.ndarray, joint_vel: np.ndarray, torque: np.ndarray,
+                      fps: float, stiffness: np.ndarray, damping: np.ndarray) -> np.ndarray:
+    """Servo goals [T, nj] (rad) for reference joint angles ``joint_pos`` [T, nj], velocities
+    ``joint_vel`` [T, nj] and required torques ``torque`` [T, nj] (see the module docstring).
+
+    Joints with zero ``stiffness`` keep the reference angle.  The result lies in the joint
+    range and changes by at most ``velocity_limit / fps`` per frame.
+    """
+    limit = np.asarray(index.torque_limit, dtype=np.float64)
+    tau = np.clip(torque, -limit, limit)
+    active = stiffness > 0
+    offset = np.zeros_like(joint_pos)
+    offset[:, active] = (tau[:, active] + damping[active] * joint_vel[:, active]) / stiffness[active]
+    low, high = index.joint_range[:, 0], index.joint_range[:, 1]
+    goals = np.clip(joint_pos + offset, low, high)
+    step = np.asarray(index.velocity_limit, dtype=np.float64) / float(fps)
+    for t in range(1, goals.shape[0]):  # sequential: each frame moves at most one step
+        goals[t] = np.clip(goals[t], goals[t - 1] - step, goals[t - 1] + step)
+    return np.clip(goals, low, high)
+
+
+def goals_digest(goals: np.ndarray) -> str:
+    """SHA-256 of the goal array (float64, C order): what report.json records."""
+    return hashlib.sha256(np.ascontiguousarray(goals, dtype=np.float64).tobytes()).hexdigest()
+
+
+def save_servo_goals(path: str | Path, goals: np.ndarray, joint_names, fps: float, robot: str, mode: str,
+                     source_sha256: str | None) -> Path:
+    """Write ``servo_goals.npz`` (schema in the module docstring)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(path, goals=np.asarray(goals, dtype=np.float64), joint_names=np.asarray(list(joint_names)),
+             fps=np.float64(fps), robot=np.asarray(robot), mode=np.asarray(mode),
+             source_sha256=np.asarray(source_sha256 or ""))
+    return path
+
+
+def load_servo_goals(path: str | Path, *, expected_sha256: str | None = None) -> dict:
+    """Read ``servo_goals.npz``; with ``expected_sha256`` (from report.json) the goal array must
+    match it.  Returns ``{"goals", "joint_names", "fps", "robot", "mode", "source_sha256"}``.
+    Raises :class:`InputError` naming the file and the field."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: servo goals file not found (validation writes it next to report.json)")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            fields = {key: data[key] for key in data.files}
+    except Exception as exc:  # a truncated or foreign file
+        raise InputError(f"{path}: not a readable servo_goals.npz ({exc})") from None
+    for key in ("goals", "joint_names", "fps", "mode"):
+        if key not in fields:
+            raise InputError(f"{path}: field '{key}' missing (servo_goals.npz needs goals, joint_names, fps, mode)")
+    goals = np.asarray(fields["goals"], dtype=np.float64)
+    names = [str(n) for n in fields["joint_names"]]
+    if goals.ndim != 2 or goals.shape[1] != len(names):
+        raise InputError(f"{path}: field 'goals' must be [T, {len(names)}] (one column per joint name), got {goals.shape}")
+    if not np.isfinite(goals).all():
+        frame = int(np.argwhere(~np.isfinite(goals))[0, 0])
+        raise InputError(f"{path}: field 'goals' is not finite at frame {frame}")
+    mode = str(fields["mode"])
+    if mode not in MODES:
+        raise InputError(f"{path}: field 'mode' is {mode!r}, expected one of {', '.join(MODES)}")
+    if expected_sha256 and goals_digest(goals) != expected_sha256:
+        raise InputError(f"{path}: goals differ from the validated ones (sha256 {expected_sha256[:12]}... in the report)")
+    return {"goals": goals, "joint_names": names, "fps": float(fields["fps"]),
+            "robot": str(fields.get("robot", "")), "mode": mode, "source_sha256": str(fields.get("source_sha256", ""))}
