@@ -65,7 +65,11 @@ PLAYBACK_MODES = ("dry-run", "sim", "port")
 #: Clip length used with constraints when no ``seconds`` is given (the planner's no-text default).
 DEFAULT_CONSTRAINED_SECONDS = 6.0
 #: Stages timed in :attr:`PipelineResult.timings`, in order.
-STAGES = ("generate", "retarget", "validate", "plots", "render", "playback")
+STAGES = ("generate", "retarget", "validate", "retime", "plots", "render", "playback")
+#: validation checks that a slower playback of the same motion can fix
+SPEED_CHECKS = frozenset({"torque", "joint_velocity", "joint_acceleration"})
+#: slow-down factors the pipeline tries, in order, up to ``PipelineConfig.max_retime``
+RETIME_STEPS = (1.25, 1.5, 2.0, 3.0)
 PLOT_FILES = ("balance_topview.png", "feet.png", "joints.png", "torques.png")
 
 
@@ -142,6 +146,12 @@ class PipelineConfig:
             which takes a fraction of a second; hardware always runs in real time).
         sim_video: with ``playback="sim"`` and ``render``, also record ``playback_sim.mp4`` (the
             simulated servo playback, ramp included; slow: about 10x the clip with software EGL).
+        max_retime: when a speed check fails (:data:`SPEED_CHECKS`: the motion asks more
+            torque, speed or acceleration than the servos have), play the robot trajectory up
+            to this many times slower (:func:`retarget.retime.retime`, tried at
+            :data:`RETIME_STEPS`) and keep the first timing whose speed checks all pass (other
+            checks are reported as they come out); the original timing is kept when none
+            does.  Thresholds are never changed.  1.0 = never slow down.
     """
 
     planner: str = "masked"
@@ -155,6 +165,7 @@ class PipelineConfig:
     plots: bool = True
     realtime: bool = False
     sim_video: bool = False
+    max_retime: float = 2.0
 
 
 @dataclass
@@ -199,6 +210,8 @@ class PipelineResult:
         report: the validation report (dict).
         model: identifiers of the generation models.
         notes: warnings worth reading (failed solver windows, forced playback ...).
+        retime_factor: how many times slower than the human motion the robot plays it (1.0:
+            not slowed down; see ``PipelineConfig.max_retime``).
     """
 
     out_dir: Path
@@ -214,6 +227,7 @@ class PipelineResult:
     report: dict
     model: str = ""
     notes: list[str] = field(default_factory=list)
+    retime_factor: float = 1.0
 
     @property
     def ok(self) -> bool:
@@ -232,6 +246,7 @@ class PipelineResult:
             "files": {k: _rel(v, self.out_dir) for k, v in self.files.items()},
             "timings_s": {k: round(v, 4) for k, v in self.timings.items()},
             "playback": asdict(self.playback), "model": self.model, "notes": list(self.notes),
+            "retime_factor": self.retime_factor,
         }
 
 
@@ -626,12 +641,23 @@ class Pipeline:
         from motok_robot.sim.trajectory import load_robot_npz
         from motok_robot.sim.validate import validate_trajectory, write_servo_goals
 
-        trajectory = load_robot_npz(files["robot"], entry["robot"])
-        trajectory.source = "robot.npz"
-        digest = hashlib.sha256(files["robot"].read_bytes()).hexdigest()  # the playback gate checks it
-        validation = validate_trajectory(trajectory, entry["index"], cfg.validation, out_dir=None,
-                                         input_sha256=digest)
+        def validate_robot_file():
+            trajectory = load_robot_npz(files["robot"], entry["robot"])
+            trajectory.source = "robot.npz"
+            digest = hashlib.sha256(files["robot"].read_bytes()).hexdigest()  # the playback gate checks it
+            return trajectory, validate_trajectory(trajectory, entry["index"], cfg.validation, out_dir=None,
+                                                   input_sha256=digest)
+
+        trajectory, validation = validate_robot_file()
         timings["validate"] = time.perf_counter() - t
+        retime_factor = 1.0
+        too_fast = SPEED_CHECKS.intersection(validation.report["failed_checks"])
+        if too_fast and cfg.max_retime > 1.0:
+            stage("retime")
+            t = time.perf_counter()
+            trajectory, validation, retime_factor = self._slow_down(files["robot"], too_fast, validation, trajectory,
+                                                                    validate_robot_file, notes)
+            timings["retime"] = time.perf_counter() - t
         report = validation.report
         report["outputs"] = {"report": "report.json", "plots": [], "video": None}
         if plots:
@@ -668,7 +694,33 @@ class Pipeline:
             out_dir=tmp, text=req["text"] or motion.text, robot=entry["robot"].name, seconds=float(motion.seconds),
             seed=req["seed"], files=files, passed=bool(report["passed"]),
             failed_checks=list(report["failed_checks"]), timings=timings, playback=pb, report=report,
-            model=motion.model, notes=notes)
+            model=motion.model, notes=notes, retime_factor=retime_factor)
+
+    def _slow_down(self, robot_path: Path, too_fast: set, validation, trajectory, validate_robot_file, notes):
+        """Play ``robot_path`` slower (:data:`RETIME_STEPS` up to ``max_retime``) until no speed
+        check fails; keep the original file and verdict when none does.  Returns
+        ``(trajectory, validation, factor)`` of the timing kept (``robot_path`` holds it)."""
+        from retarget.io import read_robot_npz, write_robot_npz
+        from retarget.retime import retime
+
+        limit = self.config.max_retime
+        original_bytes = robot_path.read_bytes()
+        original = read_robot_npz(robot_path)
+        before = ", ".join(f"{name} {validation.report['checks'][name]['value']:.2f}" for name in sorted(too_fast))
+        factors = [f for f in RETIME_STEPS if f < limit - 1e-9] + [limit]
+        for factor in factors:
+            write_robot_npz(robot_path, retime(original, factor))
+            slowed_trajectory, slowed = validate_robot_file()
+            if not SPEED_CHECKS.intersection(slowed.report["failed_checks"]):
+                after = ", ".join(f"{name} {slowed.report['checks'][name]['value']:.2f}" for name in sorted(too_fast))
+                notes.append(f"retime: the motion asked more than the servos have ({before}); the robot plays it "
+                             f"{factor:g}x slower ({after}; {slowed_trajectory.duration_s:.1f} s instead of "
+                             f"{trajectory.duration_s:.1f} s)")
+                return slowed_trajectory, slowed, factor
+        robot_path.write_bytes(original_bytes)
+        notes.append(f"retime: {before} fail; playing up to {limit:g}x slower did not bring "
+                     f"{', '.join(sorted(too_fast))} within the servo limits, so the original timing is kept")
+        return trajectory, validation, 1.0
 
     def _generate(self, req, constraints, control, control_path):
         """Generation, unconstrained (the planner) or constrained (the control stage), or a motion file."""
@@ -891,6 +943,7 @@ class Pipeline:
 _FILE_LABELS = {
     "motion": "human motion (joints, features, tokens)",
     "robot": "robot trajectory (qpos, contacts, keypoint errors)",
+    "servo_goals": "servo goals the physics rollout tracked and playback streams (feedforward)",
     "report": "validation report",
     "video": "validation video (reference | physics rollout)",
     "playback_log": "playback log (one row per control tick)",
@@ -905,7 +958,8 @@ def summary_markdown(result: PipelineResult) -> str:
     root = result.out_dir
     verdict = "PASS" if result.passed else "FAIL"
     lines = [f"# {verdict}: \"{result.text}\"", "",
-             f"* robot: `{result.robot}`; clip: {result.seconds:.2f} s; seed: {result.seed}",
+             f"* robot: `{result.robot}`; clip: {result.seconds:.2f} s; seed: {result.seed}"
+             + (f"; the robot plays it {result.retime_factor:g}x slower (servo limits)" if result.retime_factor != 1.0 else ""),
              f"* models: `{result.model}`" if result.model else "* models: -",
              f"* validation: **{verdict}**"
              + (f" - failing checks: {', '.join(f'`{c}`' for c in result.failed_checks)}" if result.failed_checks else

@@ -20,6 +20,8 @@ from pathlib import Path
 
 
 def register(commands, groups) -> None:
+    from motok_robot.pipeline import PipelineConfig  # light: no torch, mujoco or casadi at import
+
     parser = commands.add_parser(
         "run", help="one command: text -> motion -> robot trajectory -> MuJoCo validation -> playback",
         description="Generate a human motion for TEXT, retarget it to the robot, validate it in MuJoCo and play it "
@@ -53,6 +55,10 @@ def register(commands, groups) -> None:
                         help="run every prompt of FILE (one per line, or CSV text,seconds,seed); writes OUT/summary.csv")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (new or empty)")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing, non-empty --out when done")
+    parser.add_argument("--max-retime", type=float, default=PipelineConfig.max_retime, metavar="S",
+                        help="when the motion is too fast for the servos (the torque, joint_velocity or "
+                        "joint_acceleration check fails), play it up to S times slower until those checks pass "
+                        "(default %(default)g; 1 = never)")
     models = parser.add_argument_group("models")
     models.add_argument("--planner", choices=("masked", "ar"), default="masked", help="planner (default masked)")
     models.add_argument("--tokenizer", type=Path, default=None, help="tokenizer run (default models/tokenizer)")
@@ -113,7 +119,7 @@ def run_command(args: argparse.Namespace) -> int:
     generation = {"cfg_scale": args.cfg} if args.cfg is not None else {}
     pipe = Pipeline(PipelineConfig(planner=args.planner, tokenizer_run=args.tokenizer, planner_run=args.planner_run,
                                    device=args.device, generation=generation, plots=not args.no_plots,
-                                   realtime=args.realtime, sim_video=args.sim_video))
+                                   realtime=args.realtime, sim_video=args.sim_video, max_retime=args.max_retime))
     if args.prompts is not None:
         return _run_batch(pipe, prompts, args, robot, playback)
 
@@ -145,8 +151,8 @@ def _has_control(args: argparse.Namespace) -> bool:
 def format_result(result) -> str:
     """The short summary printed by ``run``: verdict, failing checks, per-stage times, files."""
     t = result.timings
-    stages = " | ".join(f"{k} {t[k]:.2f} s" for k in ("load", "setup", "generate", "retarget", "validate", "plots",
-                                                        "render", "playback") if k in t)
+    stages = " | ".join(f"{k} {t[k]:.2f} s" for k in ("load", "setup", "generate", "retarget", "validate", "retime",
+                                                        "plots", "render", "playback") if k in t)
     pb = result.playback
     lines = [result.line(),
              "  failed checks: " + (", ".join(result.failed_checks) if result.failed_checks else "none"),

@@ -16,6 +16,8 @@ Output: ``robot.npz`` exactly as in docs/CONTRACTS.md::
     source          float32 [T, 22, 3] human joints as given (metres, z up)
     solver_status   str (JSON)        per window: start, stop, status, success, iterations,
                                       violated (constraint or null), violation, seconds
+    retime_factor   float             how many times slower than the human motion the
+                                      trajectory plays (1.0 as retargeted; retarget.retime)
 """
 
 from __future__ import annotations
@@ -105,10 +107,12 @@ def read_input(path: str | Path, skeleton: str = "bandai", asf: str | Path | Non
 
 
 def write_robot_npz(path: str | Path, result) -> Path:
-    """Write a :class:`retarget.solve.RetargetResult` as ``robot.npz`` (see module doc)."""
+    """Write a :class:`retarget.solve.RetargetResult` or a :class:`RobotTrajectory` as
+    ``robot.npz`` (see module doc)."""
     path = Path(path)
     if path.parent and not path.parent.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
+    status = result.solver_status() if callable(result.solver_status) else result.solver_status
     np.savez(
         path,
         qpos=np.asarray(result.qpos, dtype=np.float64),
@@ -119,7 +123,8 @@ def write_robot_npz(path: str | Path, result) -> Path:
         keypoint_error=np.asarray(result.keypoint_error, dtype=np.float64),
         keypoint_names=np.array(result.keypoint_names, dtype=str),
         source=np.asarray(result.source, dtype=np.float32),
-        solver_status=np.array(json.dumps(result.solver_status())),
+        solver_status=np.array(json.dumps(status)),
+        retime_factor=np.array(float(getattr(result, "retime_factor", 1.0))),
     )
     return path
 
@@ -137,6 +142,7 @@ class RobotTrajectory:
     keypoint_names: list[str]
     source: np.ndarray
     solver_status: list[dict]
+    retime_factor: float = 1.0
 
 
 ROBOT_NPZ_FIELDS = ("qpos", "joint_names", "robot", "fps", "contacts", "keypoint_error", "keypoint_names", "source", "solver_status")
@@ -162,6 +168,7 @@ def read_robot_npz(path: str | Path) -> RobotTrajectory:
                 keypoint_names=[str(n) for n in d["keypoint_names"]],
                 source=np.asarray(d["source"]),
                 solver_status=json.loads(str(d["solver_status"])),
+                retime_factor=float(d["retime_factor"]) if "retime_factor" in d.files else 1.0,
             )
     except InputError:
         raise
