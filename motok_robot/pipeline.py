@@ -149,8 +149,8 @@ class PipelineConfig:
         max_retime: when a speed check fails (:data:`SPEED_CHECKS`: the motion asks more
             torque, speed or acceleration than the servos have), play the robot trajectory up
             to this many times slower (:func:`retarget.retime.retime`, tried at
-            :data:`RETIME_STEPS`) and keep the first timing whose speed checks all pass (other
-            checks are reported as they come out); the original timing is kept when none
+            :data:`RETIME_STEPS`) and keep the first timing whose speed checks all pass and that
+            fails no check the original timing passed; the original timing is kept when none
             does.  Thresholds are never changed.  1.0 = never slow down.
     """
 
@@ -698,7 +698,8 @@ class Pipeline:
 
     def _slow_down(self, robot_path: Path, too_fast: set, validation, trajectory, validate_robot_file, notes):
         """Play ``robot_path`` slower (:data:`RETIME_STEPS` up to ``max_retime``) until no speed
-        check fails; keep the original file and verdict when none does.  Returns
+        check fails and no check fails that passed before; keep the original file and verdict
+        when no factor does.  Returns
         ``(trajectory, validation, factor)`` of the timing kept (``robot_path`` holds it)."""
         from retarget.io import read_robot_npz, write_robot_npz
         from retarget.retime import retime
@@ -708,10 +709,12 @@ class Pipeline:
         original = read_robot_npz(robot_path)
         before = ", ".join(f"{name} {validation.report['checks'][name]['value']:.2f}" for name in sorted(too_fast))
         factors = [f for f in RETIME_STEPS if f < limit - 1e-9] + [limit]
+        failed_before = set(validation.report["failed_checks"])
         for factor in factors:
             write_robot_npz(robot_path, retime(original, factor))
             slowed_trajectory, slowed = validate_robot_file()
-            if not SPEED_CHECKS.intersection(slowed.report["failed_checks"]):
+            failed_now = set(slowed.report["failed_checks"])
+            if not SPEED_CHECKS.intersection(failed_now) and failed_now <= failed_before:
                 after = ", ".join(f"{name} {slowed.report['checks'][name]['value']:.2f}" for name in sorted(too_fast))
                 notes.append(f"retime: the motion asked more than the servos have ({before}); the robot plays it "
                              f"{factor:g}x slower ({after}; {slowed_trajectory.duration_s:.1f} s instead of "
@@ -719,7 +722,8 @@ class Pipeline:
                 return slowed_trajectory, slowed, factor
         robot_path.write_bytes(original_bytes)
         notes.append(f"retime: {before} fail; playing up to {limit:g}x slower did not bring "
-                     f"{', '.join(sorted(too_fast))} within the servo limits, so the original timing is kept")
+                     f"{', '.join(sorted(too_fast))} within the servo limits without failing another check, "
+                     "so the original timing is kept")
         return trajectory, validation, 1.0
 
     def _generate(self, req, constraints, control, control_path):

@@ -98,4 +98,6 @@ def test_pipeline_slows_a_motion_that_is_too_fast(fast_wave, tmp_path):
 
     assert report["input"]["sha256"] == hashlib.sha256(result.files["robot"].read_bytes()).hexdigest()
     assert result.playback.status == "completed"
+    # the streamed goals are the validated ones: the playback limiter never had to clamp them
+    assert json.loads(result.files["playback_stats"].read_text())["limited"] == 0
     assert "slower" in result.files["summary"].read_text()

@@ -121,6 +121,11 @@ class ValidationConfig:
     #: A position servo only pushes once it lags, so plain reference goals make a compliant
     #: servo robot sag and trail (walks fall open loop; docs/validation.md).
     servo_feedforward: bool = True
+    #: the servo goals change by at most this fraction of the velocity limit per frame (both
+    #: modes).  Playback's per-tick step is the velocity limit floored to whole encoder ticks
+    #: (XM430 at 125 Hz: 0.9988 of 4.8 rad/s) and its commands are rounded to ticks; 0.95
+    #: keeps the goals clear of that clamp, so the servos get what the rollout tracked.
+    servo_goal_velocity_fraction: float = 0.95
     #: proportional gain (N m / rad per N m of force limit) of the software PD used only for
     #: robots whose actuators are plain motors (position servos track their own targets).
     motor_kp_per_nm: float = 10.0

@@ -17,7 +17,8 @@ where ``tau_ref`` is the required joint torque of the validator's inverse dynami
 (:mod:`motok_robot.sim.dynamics`: ``mj_inverse`` with the ground reaction distributed over
 the soles in contact; it includes the joints' passive damping and armature) clipped to the
 actuator's force limit.  The goals are then clamped to the joint range and rate-limited to
-the servo velocity limit per frame (``velocity_limit / fps``), so that the playback
+a fraction of the servo velocity limit per frame (``ValidationConfig.servo_goal_velocity_fraction``,
+0.95, clear of playback's whole-tick step), so that the playback
 streamer's own clamps (position limits, ``velocity_limit / rate`` per tick on the frames
 linearly interpolated to its rate) never change them: what the physics rollout tracked is
 exactly what the servos receive.  It is still open loop: no sensor is read, and a servo
@@ -71,12 +72,14 @@ def servo_gains(model, index) -> tuple[np.ndarray, np.ndarray]:
 
 
 def feedforward_goals(index, joint_pos: np.ndarray, joint_vel: np.ndarray, torque: np.ndarray,
-                      fps: float, stiffness: np.ndarray, damping: np.ndarray) -> np.ndarray:
+                      fps: float, stiffness: np.ndarray, damping: np.ndarray,
+                      velocity_fraction: float = 1.0) -> np.ndarray:
     """Servo goals [T, nj] (rad) for reference joint angles ``joint_pos`` [T, nj], velocities
     ``joint_vel`` [T, nj] and required torques ``torque`` [T, nj] (see the module docstring).
 
-    Joints with zero ``stiffness`` keep the reference angle.  The result lies in the joint
-    range and changes by at most ``velocity_limit / fps`` per frame.
+    Joints with zero ``stiffness`` keep the reference angle (pass zero stiffness everywhere
+    for plain reference goals).  The result lies in the joint range and changes by at most
+    ``velocity_fraction x velocity_limit / fps`` per frame.
     """
     limit = np.asarray(index.torque_limit, dtype=np.float64)
     tau = np.clip(torque, -limit, limit)
@@ -85,7 +88,7 @@ def feedforward_goals(index, joint_pos: np.ndarray, joint_vel: np.ndarray, torqu
     offset[:, active] = (tau[:, active] + damping[active] * joint_vel[:, active]) / stiffness[active]
     low, high = index.joint_range[:, 0], index.joint_range[:, 1]
     goals = np.clip(joint_pos + offset, low, high)
-    step = np.asarray(index.velocity_limit, dtype=np.float64) / float(fps)
+    step = velocity_fraction * np.asarray(index.velocity_limit, dtype=np.float64) / float(fps)
     for t in range(1, goals.shape[0]):  # sequential: each frame moves at most one step
         goals[t] = np.clip(goals[t], goals[t - 1] - step, goals[t - 1] + step)
     return np.clip(goals, low, high)

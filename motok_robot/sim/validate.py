@@ -65,12 +65,11 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
     timing["kinematic"] = time.perf_counter() - start
     if physics:
         start = time.perf_counter()
-        model, _ = servo_model(index, config)
-        if config.servo_feedforward:
-            stiffness, damping = servo_gains(model, index)
-            goals = feedforward_goals(index, kin.joint_pos, kin.joint_vel, kin.torque, trajectory.fps, stiffness, damping)
-        else:
-            goals = kin.joint_pos.copy()
+        stiffness, damping = servo_gains(servo_model(index, config)[0], index)
+        if not config.servo_feedforward:
+            stiffness = np.zeros_like(stiffness)  # the reference angles (still within the servo's limits)
+        goals = feedforward_goals(index, kin.joint_pos, kin.joint_vel, kin.torque, trajectory.fps, stiffness, damping,
+                                  config.servo_goal_velocity_fraction)
         roll = simulate(index, trajectory.qpos, trajectory.fps, config, goals=goals)
         timing["physics"] = time.perf_counter() - start
     checks, metrics, per_foot, per_joint = build_checks(index, kin, roll, config, trajectory.contacts)
