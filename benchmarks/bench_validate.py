@@ -3,8 +3,8 @@
 Targets: kinematic + physics (no render) >= 50x real time on 2 cores; a 10 s render at 30 fps
 <= 20 s.  Columns: kinematic replay and physics rollout alone (and the real-time factor of
 their sum, by wall and by CPU time), then ``validate`` without plots or render as the CLI runs
-it (replay and rollout overlapped on two threads; the real-time factor that counts), then
-the render.  The clip is the procedural walk of ``motok_robot.sim.synthetic`` (feet planted,
+it (the replay, then the rollout tracking the feedforward servo goals computed from the
+replay's torques; the real-time factor that counts), then the render.  The clip is the procedural walk of ``motok_robot.sim.synthetic`` (feet planted,
 both feet stepping), resampled to exactly 10 s at 20 fps.  Each stage is timed ``--repeat``
 times and the median is reported, as wall time and as this process's CPU time (the stages
 are single-threaded, so on a shared, overloaded machine the CPU time is what an idle core
@@ -78,7 +78,7 @@ def bench_robot(name: str, repeat: int, render: bool) -> dict:
            "physics_cpu_s": phys_cpu, "kinematic_plus_physics_cpu_rtf": CLIP_S / (kin_cpu + phys_cpu),
            "fell": roll.fell}
     trajectory = RobotTrajectory(qpos, FPS, index.joint_names, name, source=f"walk10s_{name}.npz")
-    # what `motok-robot validate --no-render --no-plots` does: replay and rollout overlapped in 2 threads
+    # what `motok-robot validate --no-render --no-plots` does: replay, feedforward goals, rollout
     both_s, both_cpu, _ = timed(lambda: validate_trajectory(trajectory, index, config, plots=False), repeat)
     row.update(validate_no_render_s=both_s, validate_no_render_cpu_s=both_cpu, validate_no_render_rtf=CLIP_S / both_s)
     with tempfile.TemporaryDirectory() as tmp:
