@@ -258,3 +258,60 @@ def test_sanity_passes_for_a_matching_evaluator_and_fails_for_a_blind_one():
 def test_frozen_windows_repeat_the_first_frame():
     w = [np.arange(6, dtype=np.float32).reshape(3, 2)]
     np.testing.assert_array_equal(frozen_windows(w)[0], [[0, 1], [0, 1], [0, 1]])
+
+
+def test_content_of_names_what_a_clip_shows():
+    from motok_robot.data.sources import content_of
+
+    assert content_of("bandai/dataset-1_walk-turn-right_angry_003") == "walk-turn-right"
+    assert content_of("mirror/bandai/dataset-1_walk-turn-right_angry_003") == "walk-turn-left"  # mirrored motion
+    assert content_of("mirror/bandai/dataset-2_raise-up-left-hand_active_090") == "raise-up-right-hand"
+    assert content_of("bandai/dataset-2_bow_normal_001") == "bow"
+    assert content_of("cmu/02_01") == "cmu" and content_of("mirror/deepmimic/humanoid3d_walk") == "deepmimic"
+
+
+def test_content_matched_clips_follow_the_test_mix():
+    from motok_robot.data.sources import content_of
+    from motok_robot.eval.protocol import content_matched_clips
+
+    names = ([f"bandai/dataset-1_walk_normal_{i:03d}" for i in range(10)]
+             + [f"bandai/dataset-1_run_normal_{i:03d}" for i in range(3)] + ["bandai/dataset-1_run_short_001"])
+
+    class Train:
+        clip_ids = list(names)
+
+        def features(self, cid):
+            return np.zeros((20 if "short" in cid else 60, 263), np.float32)
+
+        def texts(self, cid):
+            return [cid]
+
+    test = [EvalClip(cid, np.zeros((60, 263), np.float32), ["t"]) for cid in
+            ["bandai/dataset-1_run_angry_001"] * 4 + ["bandai/dataset-1_walk_angry_001", "cmu/02_01"]]
+    picked = content_matched_clips(test, Train(), min_frames=40, seed=0)
+    assert len(picked) == len(test)
+    assert [content_of(c.clip_id) for c in picked[:5]] == ["run"] * 4 + ["walk"]
+    runs = [c.clip_id for c in picked[:4]]
+    assert len(set(runs[:3])) == 3 and runs[3] in runs[:3]  # three usable runs, then reuse
+    assert all("short" not in c for c in runs)  # too short for the evaluator: skipped
+    assert picked[5].clip_id in names  # a content the split lacks draws from all of it
+    again = content_matched_clips(test, Train(), min_frames=40, seed=0)
+    assert [c.clip_id for c in again] == [c.clip_id for c in picked]
+
+
+def test_sanity_checks_test_vs_train_on_the_matched_mix():
+    clips, sigs = make_clips(64, 5)
+    shifted, shift_sigs = make_clips(64, 6, prefix="other")  # another content mix: signatures moved away
+    for clip in shifted:
+        clip.features[:, :SIG] += 0.6
+    matched, matched_sigs = make_clips(64, 8, prefix="matched")  # same mix as the test clips
+    floor, floor_sigs = make_clips(64, 7, prefix="floor")
+    embedder = ToyEmbedder({**sigs, **shift_sigs, **matched_sigs, **floor_sigs})
+    report = evaluator_sanity(clips, embedder, CFG, shifted, floor, matched)
+    check = report.checks["fid_test_vs_train_small"]
+    assert check["passed"], format_sanity(report)
+    assert report.values["fid_test_vs_train"] > 5 * report.values["fid_test_vs_matched_train"]
+    assert check["fid_test_vs_train_unmatched"] == report.values["fid_test_vs_train"]
+    assert "fid_test_vs_matched_train" in format_sanity(report)
+    # without a matched sample the plain one is checked, and the shifted mix fails it
+    assert not evaluator_sanity(clips, embedder, CFG, shifted, floor).checks["fid_test_vs_train_small"]["passed"]

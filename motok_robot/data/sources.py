@@ -52,6 +52,21 @@ ACRNN_LEAD_IN_FRAMES = 9
 _BANDAI_RE = re.compile(r"dataset-(\d+)_([a-z-]+?)_([a-z-]+)_(\d+)$")
 
 
+def content_of(clip_id: str) -> str:
+    """What a prepared clip shows, for matching sets by content: the Bandai content of the file
+    name (``walk-turn-right``; left and right swapped for a ``mirror/`` clip, whose motion is
+    mirrored), otherwise the source (``cmu``, ``deepmimic`` ...)."""
+    mirrored = clip_id.startswith("mirror/")
+    base = clip_id.removeprefix("mirror/")
+    m = _BANDAI_RE.search(base.rsplit("/", 1)[-1]) if base.startswith("bandai/") else None
+    if not m:
+        return base.split("/", 1)[0]
+    content = m.group(2)
+    if mirrored:
+        content = "-".join({"left": "right", "right": "left"}.get(w, w) for w in content.split("-"))
+    return content
+
+
 @dataclass
 class SourceOptions:
     """What the CLI passes to every job of a source."""

@@ -292,18 +292,20 @@ def _eval_generation(args: argparse.Namespace) -> int:
 
 
 def _eval_evaluator(args: argparse.Namespace) -> int:
-    from motok_robot.eval.protocol import clips_from_dataset, format_table, sample_clips
+    from motok_robot.eval.protocol import clips_from_dataset, content_matched_clips, format_table, sample_clips
     from motok_robot.eval.sanity import evaluator_sanity, format_sanity
 
     cfg = _protocol_config(args)
     _wants_official(args)
     embedder, evaluator_name = load_embedder(args)
     test = clips_from_dataset(_load_split(args.data, "test"), embedder.min_frames, cfg.max_clips)
-    reference = floor = None
+    reference = floor = matched = None
     if not args.no_train_reference:  # two disjoint train samples as large as the test set
-        both = sample_clips(_load_split(args.data, "train"), embedder.min_frames, 2 * len(test), seed=cfg.seed)
+        train = _load_split(args.data, "train")
+        both = sample_clips(train, embedder.min_frames, 2 * len(test), seed=cfg.seed)
         reference, floor = both[: len(test)], both[len(test) :] or None
-    report = evaluator_sanity(test, embedder, cfg, reference, floor)
+        matched = content_matched_clips(test, train, embedder.min_frames, seed=cfg.seed)
+    report = evaluator_sanity(test, embedder, cfg, reference, floor, matched)
     title = f"Evaluator sanity on {args.data} (test split), evaluator: {evaluator_name}"
     table = format_table(report.result, title) + "\n\n" + format_sanity(report)
     payload = {"command": _command_line("eval evaluator", args), "evaluator": evaluator_name, "data": str(args.data),

@@ -164,6 +164,52 @@ def sample_clips(dataset, min_frames: int, n: int, seed: int = 0) -> list[EvalCl
     return clips_from_dataset(_Shuffled(), min_frames, max_clips=n)
 
 
+def content_matched_clips(test: Sequence[EvalClip], dataset, min_frames: int, seed: int = 0) -> list[EvalClip]:
+    """Clips of ``dataset`` (a train split) with the content mix of ``test``: for each test clip
+    in order, an unused clip of the same content (:func:`motok_robot.data.sources.content_of`)
+    with at least ``min_frames`` frames, drawn in a seeded order; a content used up starts
+    over (reuse), a content the split lacks draws from all its clips.  A split held out by
+    content and style groups has a content mix unlike the train split's, and FID compares
+    whole distributions: this reference asks whether real motions *of the same kinds* are
+    close, which a random split (HumanML3D's) gives by construction."""
+    from collections import defaultdict
+
+    from motok_robot.data.sources import content_of
+
+    rng = np.random.default_rng([seed, 11])
+    pools: dict[str, list[str]] = defaultdict(list)
+    for clip_id in dataset.clip_ids:
+        pools[content_of(clip_id)].append(clip_id)
+    everything = list(dataset.clip_ids)
+    for pool in (*pools.values(), everything):
+        rng.shuffle(pool)
+    cursor: dict[str, int] = defaultdict(int)
+    loaded: dict[str, EvalClip | None] = {}
+
+    class _One:  # one clip of the split, read through clips_from_dataset's checks
+        def __init__(self, clip_id: str):
+            self.clip_ids = [clip_id]
+            self.features, self.texts = dataset.features, dataset.texts
+
+    def usable(clip_id: str) -> EvalClip | None:
+        if clip_id not in loaded:
+            found = clips_from_dataset(_One(clip_id), min_frames)
+            loaded[clip_id] = found[0] if found else None
+        return loaded[clip_id]
+
+    out: list[EvalClip] = []
+    for clip in test:
+        key = content_of(clip.clip_id)
+        pool = pools.get(key) or everything
+        for _ in range(len(pool)):
+            candidate = usable(pool[cursor[key] % len(pool)])
+            cursor[key] += 1
+            if candidate is not None:
+                out.append(candidate)
+                break
+    return out
+
+
 @dataclass
 class Draw:
     """One repeat's sample of the test clips: order, captions and windows."""
