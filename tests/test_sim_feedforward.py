@@ -116,8 +116,11 @@ def test_report_records_and_writes_the_goals(tiny, tmp_path):
 
 
 def test_goals_file_errors_name_the_problem(tmp_path):
-    with pytest.raises(InputError, match="not found"):
+    with pytest.raises(InputError, match="missing.npz: servo goals file not found"):
         load_servo_goals(tmp_path / "missing.npz")
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(InputError, match="junk.npz: not a readable .npz file"):
+        load_servo_goals(tmp_path / "junk.npz")
     bad = tmp_path / "bad.npz"
     np.savez(bad, goals=np.zeros((3, 2)), joint_names=np.array(["a"]), fps=20.0, mode="feedforward")
     with pytest.raises(InputError, match="'goals' must be"):

@@ -21,6 +21,7 @@ import numpy as np
 
 from motok_robot.errors import InputError
 from motok_robot.motion.skeleton import NUM_JOINTS
+from motok_robot.npz_files import read_npz_fields
 
 _EPOCH = (1980, 1, 1, 0, 0, 0)
 
@@ -67,13 +68,7 @@ def save_motion(path: str | Path, joints: np.ndarray, features: np.ndarray, toke
 def load_motion(path: str | Path) -> dict[str, np.ndarray | str | int]:
     """Read a ``motion.npz`` -> dict with numpy arrays and plain ``text``/``model``/``seed``/``fps``."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: motion file not found")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
-        raise InputError(f"{path}: not a readable .npz file ({exc})") from None
+    data = read_npz_fields(path, "motion file")
     for key in ("joints", "fps"):
         if key not in data:
             raise InputError(f"{path}: missing field {key!r}")

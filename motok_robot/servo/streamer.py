@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from motok_robot.errors import HardwareError, InputError
+from motok_robot.npz_files import read_npz_fields
 from motok_robot.servo import control_table as ct
 from motok_robot.servo.bus import (
     ServoAlertError,
@@ -104,13 +105,7 @@ def load_trajectory(path: str | Path, servo_map: ServoMap, robot_name: str | Non
     what was validated.  Raises InputError naming the file and field.
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such trajectory file")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            fields = {k: data[k] for k in data.files}
-    except Exception as exc:
-        raise InputError(f"{path}: not a readable .npz file ({exc})") from None
+    fields = read_npz_fields(path, "trajectory file")
     for key in ("qpos", "joint_names", "fps"):
         if key not in fields:
             raise InputError(f"{path}: field '{key}' missing (robot.npz needs qpos, joint_names, robot, fps)")

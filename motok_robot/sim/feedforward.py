@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from motok_robot.errors import InputError
+from motok_robot.npz_files import read_npz_fields
 
 GOALS_FILE = "servo_goals.npz"
 MODES = ("feedforward", "reference")
@@ -115,13 +116,7 @@ def load_servo_goals(path: str | Path, *, expected_sha256: str | None = None) ->
     match it.  Returns ``{"goals", "joint_names", "fps", "robot", "mode", "source_sha256"}``.
     Raises :class:`InputError` naming the file and the field."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: servo goals file not found (validation writes it next to report.json)")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            fields = {key: data[key] for key in data.files}
-    except Exception as exc:  # a truncated or foreign file
-        raise InputError(f"{path}: not a readable servo_goals.npz ({exc})") from None
+    fields = read_npz_fields(path, "servo goals file")  # validation writes it next to report.json
     for key in ("goals", "joint_names", "fps", "mode"):
         if key not in fields:
             raise InputError(f"{path}: field '{key}' missing (servo_goals.npz needs goals, joint_names, fps, mode)")
