@@ -306,9 +306,11 @@ def test_keep_best_keeps_the_lowest_val_loss_weights(runs, tmp_path, monkeypatch
         return {k.removeprefix("model."): v for k, v in flat.items() if name == "model.safetensors" or k.startswith("model.")}
 
     out = tmp_path / "ar"
+    keep_best = tmp_path / "keep_best.json"
+    keep_best.write_text(json.dumps({**TINY_PLANNER, "train": {**TINY_PLANNER["train"], "keep_best": True}}))
     common = ["train", "planner", "--data", str(runs / "data"), "--tokenizer", str(runs / "tok"), "--kind", "ar",
               "--out", str(out), "--val-every", "2", "--seed", "1"]
-    assert main(common + ["--steps", "4", "--config", str(runs / "tiny.json")]) == 0
+    assert main(common + ["--steps", "4", "--config", str(keep_best)]) == 0
     at_step_4 = weights(out, "checkpoint.safetensors")
     assert all(torch.equal(at_step_4[k], v) for k, v in weights(out, "model.safetensors").items())
     assert planner_train._best_val_loss(out / "metrics.csv", 4) == 2.0
@@ -321,3 +323,23 @@ def test_keep_best_keeps_the_lowest_val_loss_weights(runs, tmp_path, monkeypatch
     latest, kept = weights(out, "checkpoint.safetensors"), weights(out, "model.safetensors")
     assert not all(torch.equal(latest[k], v) for k, v in kept.items())
     assert not all(torch.equal(at_step_4[k], v) for k, v in kept.items())
+
+
+def test_by_default_the_latest_weights_are_kept(runs, tmp_path, monkeypatch):
+    """Without keep_best (the default, as the shipped planners were trained) model.safetensors
+    follows the latest validation even when the val loss rises."""
+    from safetensors.torch import load_file
+
+    import motok_robot.planner.train as planner_train
+
+    scripted = iter([2.0, 3.0])
+    real_evaluate = planner_train.evaluate
+    monkeypatch.setattr(planner_train, "evaluate", lambda *a, **k: {**real_evaluate(*a, **k), "val_loss": next(scripted)})
+    out = tmp_path / "ar"
+    assert main(["train", "planner", "--data", str(runs / "data"), "--tokenizer", str(runs / "tok"), "--kind", "ar",
+                 "--out", str(out), "--val-every", "2", "--seed", "1", "--steps", "4",
+                 "--config", str(runs / "tiny.json")]) == 0
+    latest = {k.removeprefix("model."): v for k, v in load_file(str(out / "checkpoint.safetensors")).items()
+              if k.startswith("model.")}
+    kept = load_file(str(out / "model.safetensors"))
+    assert kept and all(torch.equal(latest[k], v) for k, v in kept.items())
