@@ -104,6 +104,8 @@ def _play_inner(args: argparse.Namespace) -> int:
     check_validation_report(path, args.report, force=args.force, robot_name=robot.name)
     servo_map = ServoMap.from_specs(robot.servos)
     trajectory = load_trajectory(path, servo_map, robot.name, args.report)
+    print("streaming the validated feedforward servo goals (servo_goals.npz)" if trajectory.goals == "feedforward"
+          else "streaming the joint angles of the trajectory (no validated servo goals for this file)")
     bus_spec = robot.bus
     baud = args.baud or (bus_spec.baud if bus_spec else 2_000_000)
     defaults = PlaybackConfig()

@@ -43,7 +43,10 @@ Schema (``"schema": "motok-robot/validation-report/1"``)::
       "per_joint": {JOINT: {...}},           # range, max_velocity_ratio, max_torque_ratio, ...
       "config":  {...},                      # the ValidationConfig used (all thresholds)
       "timing_s": {"kinematic": s, "physics": s, "plots": s, "render": s},
-      "outputs": {"report": path, "plots": [path, ...], "video": path|null}
+      "outputs": {"report": path, "plots": [path, ...], "video": path|null},
+      "servo_goals": {"mode": "feedforward"|"reference",   # what the rollout's servos tracked
+                      "file": "servo_goals.npz"|null,     # written next to report.json
+                      "sha256": str}|null                 # of the goal array; null without physics
     }
 
 Check names: ``foot_skate_ratio``, ``foot_skate_distance``, ``penetration``, ``floating``,
