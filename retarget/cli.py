@@ -38,6 +38,8 @@ def register(commands, groups) -> None:
                    help=f"smallest gap between the inner sole edges across the heading, robot leg lengths (default {d.min_foot_gap}; negative = off)")
     p.add_argument("--com-weight", type=float, default=d.weights.com, help=f"soft CoM-over-support weight (default {d.weights.com} = off)")
     p.add_argument("--zmp-weight", type=float, default=d.weights.zmp, help=f"soft cart-table ZMP-over-support weight (default {d.weights.zmp} = off; 300 measured in docs/retarget.md)")
+    p.add_argument("--no-self-collision", action="store_true",
+                   help="do not keep the robot's bodies apart (faster; the validator's self_collision check may then fail)")
     p.add_argument("--plot", default=None, metavar="FILE.png", help="also draw the result (targets vs robot, sole heights, errors)")
     p.set_defaults(func=run)
 
@@ -65,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--foot-gap must be a number")
     config = replace(config, min_foot_gap=None if gap is None or gap < 0 else gap,
                      swing=replace(config.swing, height=args.swing_height),
-                     weights=replace(config.weights, com=args.com_weight, zmp=args.zmp_weight))
+                     weights=replace(config.weights, com=args.com_weight, zmp=args.zmp_weight),
+                     collision=replace(config.collision, enabled=not args.no_self_collision))
     motion = read_input(args.input, skeleton=args.skeleton, asf=args.asf)
     robot = load_robot(args.robot)
     import time
@@ -85,6 +88,9 @@ def run(args: argparse.Namespace) -> int:
         f"  joint range excess {m.joint_range_excess:.2e} rad, max velocity {m.velocity_ratio_max * 100:.0f}% of limit, "
         f"mean joint acceleration {m.joint_acceleration_mean:.1f} rad/s^2"
     )
+    if result.collision_pairs:
+        print(f"  self-collision: {len(result.collision_pairs)} geom pairs came close and were kept apart in "
+              f"{result.collision_rounds} re-solve(s): {', '.join(result.collision_pairs)}")
     for w in failed:
         print(f"  window frames {w.start}-{w.stop - 1}: {w.status}; violated: {w.violated or 'none'} ({w.violation:.3g})", file=sys.stderr)
     if failed and not config.allow_partial:

@@ -79,6 +79,24 @@ class SwingConfig:
 
 
 @dataclass(frozen=True)
+class CollisionConfig:
+    """Self-collision avoidance (``retarget.collision``; metres).
+
+    After a solve, body pairs that overlap or come closer than ``detect_margin`` (MuJoCo's
+    collision detection on the robot's own geoms) get constraint rows that keep them at least
+    ``margin`` apart, and the clip is solved again from that solution; repeated while new pairs
+    come close, at most ``max_rounds`` times. ``enabled=False`` turns it off (the behaviour
+    before this existed). ``margin`` leaves room for servo tracking error and for the 2 mm depth
+    that ``motok-robot validate`` tolerates.
+    """
+
+    enabled: bool = True
+    margin: float = 0.004
+    detect_margin: float = 0.006
+    max_rounds: int = 3
+
+
+@dataclass(frozen=True)
 class SolverConfig:
     """IPOPT settings (see https://coin-or.github.io/Ipopt/OPTIONS.html)."""
 
@@ -116,6 +134,7 @@ class RetargetConfig:
     weights: CostWeights = field(default_factory=CostWeights)
     contacts: ContactConfig = field(default_factory=ContactConfig)
     swing: SwingConfig = field(default_factory=SwingConfig)
+    collision: CollisionConfig = field(default_factory=CollisionConfig)
     solver: SolverConfig = field(default_factory=SolverConfig)
     ground_height: float = 0.0  # metres, world z of the floor
     presolve_frames: int = 15  # the first window is warm-started by a sweep of windows this long (0 = off)

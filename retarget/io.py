@@ -18,13 +18,15 @@ Output: ``robot.npz`` exactly as in docs/CONTRACTS.md::
                                       violated (constraint or null), violation, seconds
     retime_factor   float             how many times slower than the human motion the
                                       trajectory plays (1.0 as retargeted; retarget.retime)
+    collision_pairs str [n]           "geom1|geom2" pairs that came close and were kept apart
+                                      by self-collision rows (retarget.collision; absent = none)
 """
 
 from __future__ import annotations
 
 import json
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -125,6 +127,7 @@ def write_robot_npz(path: str | Path, result) -> Path:
         source=np.asarray(result.source, dtype=np.float32),
         solver_status=np.array(json.dumps(status)),
         retime_factor=np.array(float(getattr(result, "retime_factor", 1.0))),
+        collision_pairs=np.array(list(getattr(result, "collision_pairs", [])), dtype=str).reshape(-1),
     )
     return path
 
@@ -143,6 +146,7 @@ class RobotTrajectory:
     source: np.ndarray
     solver_status: list[dict]
     retime_factor: float = 1.0
+    collision_pairs: list[str] = field(default_factory=list)  # geom pairs retargeting kept apart
 
 
 ROBOT_NPZ_FIELDS = ("qpos", "joint_names", "robot", "fps", "contacts", "keypoint_error", "keypoint_names", "source", "solver_status")
@@ -169,6 +173,7 @@ def read_robot_npz(path: str | Path) -> RobotTrajectory:
                 source=np.asarray(d["source"]),
                 solver_status=json.loads(str(d["solver_status"])),
                 retime_factor=float(d["retime_factor"]) if "retime_factor" in d.files else 1.0,
+                collision_pairs=[str(n) for n in d["collision_pairs"]] if "collision_pairs" in d.files else [],
             )
     except InputError:
         raise

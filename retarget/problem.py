@@ -44,6 +44,9 @@ contact, the midpoint of both in double support.
   (flat, low sole) and the sole site moves at most a small step horizontally;
 * the lateral distance of the left sole site from the right one across the human heading is
   at least a minimum (the feet do not cross into each other).
+* optional self-collision rows (``collision_pairs``, :mod:`retarget.collision`): clearances
+  ``>= 0`` between the spheres and solids of the given body pairs (a problem per pair set; the
+  retargeter adds the pairs that come close, so clips without contact pay nothing).
 
 Joint ranges and the base tilt, yaw and height bounds are variable bounds (no rows in ``g``).
 """
@@ -116,6 +119,7 @@ class RobotKinematics:
     leg_length: float
     nominal_x: np.ndarray  # [nx]
     nominal_sites: dict  # human joint -> nominal world position (3,)
+    tree: KinematicTree | None = None
 
     @classmethod
     def build(cls, robot: RetargetRobot) -> "RobotKinematics":
@@ -123,12 +127,7 @@ class RobotKinematics:
         nj = len(robot.joint_names)
         nx = 6 + nj
         x = ca.SX.sym("x", nx)
-        qpos = [ca.SX(float(v)) for v in robot.nominal_qpos]
-        for i, a in enumerate(robot.qpos_adr):
-            qpos[int(a)] = x[6 + i]
-        qpos[0], qpos[1], qpos[2] = x[0], x[1], x[2]
-        qsym = ca.vertcat(*qpos)
-        frames = forward_kinematics(tree, qsym, root_rotation=euler_zyx_matrix(x[3], x[4], x[5]))
+        frames = _body_frames(robot, tree, x)
         kp = [site_position(tree, frames, tree.site_id(k.site)) for k in robot.keypoints]
         # sole forward axis: the site-local direction that is world +x in the nominal pose
         nominal_fk = _numeric_site_rotations(robot, [robot.soles[s].site for s in SIDES])
@@ -160,7 +159,16 @@ class RobotKinematics:
             leg = robot_leg_length(nominal_sites)
         except Exception:
             leg = float(max(robot.nominal_qpos[2], 0.1))
-        return cls(robot=robot, nx=nx, nj=nj, frame=frame, leg_length=leg, nominal_x=nominal_x, nominal_sites=nominal_sites)
+        return cls(robot=robot, nx=nx, nj=nj, frame=frame, leg_length=leg, nominal_x=nominal_x, nominal_sites=nominal_sites, tree=tree)
+
+    def clearance_function(self, pairs: tuple, margin: float) -> tuple[ca.Function, list[str]]:
+        """``x[nx] -> clearances[n]`` (m, ``>= 0`` = apart by ``margin``) of the self-collision
+        ``pairs`` (:class:`retarget.collision.PairGeometry`), and the name of each row."""
+        from retarget.collision import clearance_rows
+
+        x = ca.SX.sym("x", self.nx)
+        rows, names = clearance_rows(self.tree, _body_frames(self.robot, self.tree, x), list(pairs), margin)
+        return ca.Function("clearance", [x], [ca.vertcat(*rows) if rows else ca.SX.zeros(0, 1)]), names
 
     def qpos_from_x(self, x: np.ndarray) -> np.ndarray:
         """``x[T, nx]`` -> MuJoCo ``qpos[T, nq]`` (quaternion w, x, y, z, sign-continuous)."""
@@ -180,6 +188,15 @@ class RobotKinematics:
         x[:, 3] = np.unwrap(x[:, 3])
         x[:, 6:] = qpos[:, self.robot.qpos_adr]
         return x
+
+
+def _body_frames(robot: RetargetRobot, tree: KinematicTree, x):
+    """World frames of every body for the solver variables ``x[nx]`` (symbolic)."""
+    qpos = [ca.SX(float(v)) for v in robot.nominal_qpos]
+    for i, a in enumerate(robot.qpos_adr):
+        qpos[int(a)] = x[6 + i]
+    qpos[0], qpos[1], qpos[2] = x[0], x[1], x[2]
+    return forward_kinematics(tree, ca.vertcat(*qpos), root_rotation=euler_zyx_matrix(x[3], x[4], x[5]))
 
 
 def _numeric_site_rotations(robot: RetargetRobot, sites: list[str]) -> list[np.ndarray]:
@@ -217,8 +234,11 @@ class WindowProblem:
         weights: CostWeights = CostWeights(),
         solver: SolverConfig = SolverConfig(),
         velocity_constraints: bool = True,
+        collision_pairs: tuple = (),
+        collision_margin: float = 0.0,
     ):
         self.kin, self.W, self.weights, self.solver_config = kin, int(window), weights, solver
+        self.collision_pairs = tuple(collision_pairs)
         self.velocity_constraints = velocity_constraints
         nv = kin.nj if velocity_constraints else 0
         robot = kin.robot
@@ -246,6 +266,7 @@ class WindowProblem:
         g, names = [], []
         frames = [kin.frame(X[:, t]) for t in range(W)]
         hist_frame = kin.frame(P_hist[:, 1])
+        clearance, clearance_names = kin.clearance_function(self.collision_pairs, collision_margin) if self.collision_pairs else (None, [])
         for t in range(W):
             xt = X[:, t]
             kp, sole, fwd, corners, com = frames[t]
@@ -310,7 +331,11 @@ class WindowProblem:
             d = sole[:2, 0] - sole[:2, 1]
             g.append(-ca.sin(h) * d[0] + ca.cos(h) * d[1])
             names += ["feet lateral separation"]
-        self._ng_frame = nv + 2 * (4 + 2 + 1) + 1
+            if clearance is not None:
+                g.append(clearance(xt))
+                names += clearance_names
+        self._n_clearance = len(clearance_names)
+        self._ng_frame = nv + 2 * (4 + 2 + 1) + 1 + self._n_clearance
         self._names = names
         self.nlp_x = ca.vec(X)
         p = ca.vertcat(*[ca.vec(q) for q in params])
@@ -399,6 +424,9 @@ class WindowProblem:
                 ub.append(np.array([slip, slip, inf if slip > 0 else 0.0]))
             lb.append([min_separation])
             ub.append([inf])
+            if self._n_clearance:
+                lb.append(np.zeros(self._n_clearance))
+                ub.append(np.full(self._n_clearance, inf))
         return np.concatenate(lb), np.concatenate(ub)
 
     def solve(

@@ -48,7 +48,8 @@ class RetargetResult:
     ``qpos[T, nq]`` MuJoCo order (free base pos, quat w x y z, joints); ``x[T, nx]`` the solver
     variables (base pos, yaw/pitch/roll, joints); ``contacts[T, 2]`` bool (left, right);
     ``keypoint_error[T, K]`` metres between robot site and scaled human target;
-    ``targets`` the scaled human targets; ``source[T, 22, 3]`` the input joints.
+    ``targets`` the scaled human targets; ``source[T, 22, 3]`` the input joints;
+    ``collision_pairs`` the geom pairs that came close and were kept apart (``retarget.collision``).
     """
 
     robot: str
@@ -64,6 +65,8 @@ class RetargetResult:
     windows: list[WindowReport] = field(default_factory=list)
     solve_seconds: float = 0.0
     mode: str = "trajectory"
+    collision_pairs: list[str] = field(default_factory=list)  # geom pairs kept apart ("geom1|geom2")
+    collision_rounds: int = 0  # re-solves with self-collision rows (0: nothing came close)
 
     @property
     def success(self) -> bool:
@@ -120,7 +123,8 @@ class Retargeter:
             raise InputError(f"window {config.window} / overlap {config.overlap}: need window >= 2 and 0 <= overlap < window - 1")
         self.robot, self.config = robot, config
         self.kin = RobotKinematics.build(robot)
-        self._problems: dict[int, WindowProblem] = {}
+        self._problems: dict[tuple, WindowProblem] = {}
+        self._monitor = None
 
     @property
     def window(self) -> int:
@@ -130,11 +134,25 @@ class Retargeter:
     def overlap(self) -> int:
         return 0 if self.config.mode == "per-frame" else self.config.overlap
 
-    def problem(self, size: int) -> WindowProblem:
-        """The compiled problem for ``size`` frames (built on first use)."""
-        if size not in self._problems:
-            self._problems[size] = WindowProblem(self.kin, size, self.config.weights, self.config.solver)
-        return self._problems[size]
+    def problem(self, size: int, geom_pairs: tuple = ()) -> WindowProblem:
+        """The compiled problem for ``size`` frames, with self-collision rows for ``geom_pairs``
+        (sorted ``(geom1, geom2)`` MuJoCo geom ids; built on first use)."""
+        from retarget.collision import pair_geometry
+
+        key = (size, tuple(geom_pairs))
+        if key not in self._problems:
+            geometry = tuple(pair_geometry(self.robot.model, *pair) for pair in geom_pairs)
+            self._problems[key] = WindowProblem(self.kin, size, self.config.weights, self.config.solver,
+                                                collision_pairs=geometry, collision_margin=self.config.collision.margin)
+        return self._problems[key]
+
+    def collision_monitor(self):
+        """The :class:`retarget.collision.CollisionMonitor` of this robot (built on first use)."""
+        from retarget.collision import CollisionMonitor
+
+        if self._monitor is None:
+            self._monitor = CollisionMonitor(self.robot.model, self.robot.nominal_qpos, self.config.collision.detect_margin)
+        return self._monitor
 
     def prepare(self, frames: int) -> None:
         """Build every problem a clip of ``frames`` frames needs (so timing can exclude it)."""
@@ -204,8 +222,6 @@ class Retargeter:
 
     def run(self, joints: np.ndarray, fps: float, progress: bool | None = None, source: str = "input") -> RetargetResult:
         """Retarget ``joints[T, 22, 3]`` (metres, z up) sampled at ``fps``."""
-        from tqdm import tqdm
-
         cfg = self.config
         joints = validate_joints(joints, source)
         if not np.isfinite(fps) or fps <= 0:
@@ -221,26 +237,10 @@ class Retargeter:
 
         x = np.zeros((T, self.kin.nx))
         known = np.zeros(T, dtype=bool)  # frames with a solved value (committed or look-ahead)
-        reports: list[WindowReport] = []
-        plan = self.windows(T)
         start_time = time.perf_counter()
-        bar = tqdm(plan, desc=f"retarget {self.robot.name} ({cfg.mode})", unit="window", disable=None if progress is None else not progress)
-        for s, e, commit in bar:
-            prob = self.problem(e - s)
-            if s == 0 and known.sum() == 0 and self._presolve_size(e) > 0:
-                self._presolve(x, known, self._presolve_size(e), e, targets, kp_targets, contacts, vel_step, swing, fps)
-            x0 = self._warm_start(x, known, s, e, targets, kp_targets)
-            history = x[s - 2 : s] if s >= 2 else (np.stack([x[0], x[0]]) if s == 1 else None)
-            prev_contact = contacts[s - 1] if s >= 1 else None
-            sol = prob.solve(
-                x0, kp_targets[s:e], targets.heading[s:e], targets.foot_dir[s:e], contacts[s:e],
-                history, prev_contact, vel_step, cfg.ground_height, **self._slice(swing, s, e), fps=fps,
-            )
-            x[s:e] = sol.x
-            known[s:e] = True
-            violated = None if sol.violated is None else f"frame {s + sol.violated_frame}: {sol.violated}"
-            reports.append(WindowReport(s, e, sol.status, sol.success, sol.iterations, violated, sol.violation, sol.solve_seconds))
-        bar.close()
+        clip = (targets, kp_targets, contacts, vel_step, swing, fps)
+        reports = self._solve_windows(x, known, clip, (), progress, f"retarget {self.robot.name} ({cfg.mode})")
+        active, rounds, reports = self._avoid_self_collision(x, known, clip, reports, progress)
         solve_seconds = time.perf_counter() - start_time
 
         qpos = self.kin.qpos_from_x(x)
@@ -250,8 +250,77 @@ class Retargeter:
             robot=self.robot.name, fps=float(fps), qpos=qpos, x=x, joint_names=list(self.robot.joint_names),
             contacts=contacts, keypoint_error=kp_err, keypoint_names=[k.human_joint for k in self.robot.keypoints],
             targets=targets, source=np.asarray(joints, dtype=np.float32), windows=reports,
-            solve_seconds=solve_seconds, mode=cfg.mode,
+            solve_seconds=solve_seconds, mode=cfg.mode, collision_rounds=rounds,
+            collision_pairs=[self._pair_name(p) for p in active],
         )
+
+    def _solve_windows(self, x, known, clip, geom_pairs: tuple, progress, desc: str) -> list[WindowReport]:
+        """Solve every window of the clip in order, writing ``x`` and ``known``; the window reports."""
+        from tqdm import tqdm
+
+        targets, kp_targets, contacts, vel_step, swing, fps = clip
+        T = len(x)
+        reports: list[WindowReport] = []
+        bar = tqdm(self.windows(T), desc=desc, unit="window", disable=None if progress is None else not progress)
+        for s, e, commit in bar:
+            prob = self.problem(e - s, geom_pairs)
+            if s == 0 and known.sum() == 0 and self._presolve_size(e) > 0:
+                self._presolve(x, known, self._presolve_size(e), e, targets, kp_targets, contacts, vel_step, swing, fps)
+            x0 = self._warm_start(x, known, s, e, targets, kp_targets)
+            history = x[s - 2 : s] if s >= 2 else (np.stack([x[0], x[0]]) if s == 1 else None)
+            prev_contact = contacts[s - 1] if s >= 1 else None
+            sol = prob.solve(
+                x0, kp_targets[s:e], targets.heading[s:e], targets.foot_dir[s:e], contacts[s:e],
+                history, prev_contact, vel_step, self.config.ground_height, **self._slice(swing, s, e), fps=fps,
+            )
+            x[s:e] = sol.x
+            known[s:e] = True
+            violated = None if sol.violated is None else f"frame {s + sol.violated_frame}: {sol.violated}"
+            reports.append(WindowReport(s, e, sol.status, sol.success, sol.iterations, violated, sol.violation, sol.solve_seconds))
+        bar.close()
+        return reports
+
+    def _avoid_self_collision(self, x, known, clip, reports: list, progress) -> tuple[list, int, list]:
+        """Re-solve the clip with self-collision rows for the geom pairs that come close; the
+        active set grows while new pairs come close (``CollisionConfig.max_rounds`` at most).
+
+        A re-solve that leaves more windows failed than the solution it started from is undone
+        (its pairs stay listed). Returns the active geom pairs, the number of re-solves and the
+        window reports of the solution kept in ``x``."""
+        cfg = self.config.collision
+        active: set = set()
+        rounds = 0
+        if not cfg.enabled:
+            return [], 0, reports
+        monitor = self.collision_monitor()
+        for _ in range(cfg.max_rounds):
+            close = set(monitor.close_pairs(self.kin.qpos_from_x(x)))
+            if close <= active:
+                break
+            active |= close
+            before = x.copy()
+            rounds += 1
+            rows = self._compiled_superset(active, {e - s for s, e, _ in self.windows(len(x))})
+            names = ", ".join(self._pair_name(p) for p in sorted(active))
+            again = self._solve_windows(x, known, clip, rows, progress, f"self-collision pass {rounds} ({names})")
+            if sum(not w.success for w in again) > sum(not w.success for w in reports):
+                x[:] = before
+                break
+            reports = again
+        return sorted(active), rounds, reports
+
+    def _compiled_superset(self, pairs: set, sizes: set) -> tuple:
+        """The smallest pair set that holds ``pairs`` and is compiled for every window size in
+        ``sizes`` (building a problem takes seconds; rows for pairs that stay apart cost little
+        to solve), else ``pairs`` sorted."""
+        found = [key for _, key in self._problems if pairs <= set(key) and all((n, key) in self._problems for n in sizes)]
+        return min(found, key=len) if found else tuple(sorted(pairs))
+
+    def _pair_name(self, pair: tuple[int, int]) -> str:
+        import mujoco
+
+        m = self.robot.model
+        return "|".join(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom {g}" for g in pair)
 
     def _warm_start(self, x, known, s, e, targets: HumanTargets, kp_targets) -> np.ndarray:
         """Initial guess for frames ``[s, e)``: earlier solutions where they exist; otherwise the

@@ -20,7 +20,7 @@ pytest.importorskip("casadi")
 
 from motok_robot.errors import InputError  # noqa: E402
 from motok_robot.motion.skeleton import JOINT_INDEX, JOINT_NAMES, rest_pose  # noqa: E402
-from retarget.config import ContactConfig, CostWeights, RetargetConfig, SolverConfig  # noqa: E402
+from retarget.config import CollisionConfig, ContactConfig, CostWeights, RetargetConfig, SolverConfig  # noqa: E402
 from retarget.contacts import contact_phases, detect_contacts  # noqa: E402
 from retarget.io import read_input, read_robot_npz, write_robot_npz  # noqa: E402
 from retarget.metrics import measure  # noqa: E402
@@ -267,6 +267,7 @@ def test_self_retarget_recovers_robot_motion(robot):
         contacts=ContactConfig(floor_height=0.0),
         solver=SolverConfig(tol=1e-8),
         min_foot_gap=None,  # the random robot motion brings the feet closer than the default gap
+        collision=CollisionConfig(enabled=False),  # ... and its limbs closer than the collision margin
     )
     rt = Retargeter(robot, cfg)
     res = rt.run(human, 20.0, progress=False)

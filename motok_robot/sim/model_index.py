@@ -22,6 +22,7 @@ import mujoco
 import numpy as np
 
 from motok_robot.errors import InputError
+from motok_robot.robots import collision
 
 SIDES = ("left", "right")
 
@@ -97,20 +98,8 @@ def index_robot(robot) -> RobotIndex:
     kin_model = copy.deepcopy(model)
     kin_model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
 
-    collision_model = copy.deepcopy(model)
-    robot_geom = collision_model.geom_bodyid != 0
-    capable = robot_geom & ((model.geom_contype | model.geom_conaffinity) != 0)
-    if capable.sum() < 2:  # a model with only visual geoms: use them all
-        capable = robot_geom
-    collision_model.geom_contype[:] = np.where(capable, 1, 0)
-    collision_model.geom_conaffinity[:] = np.where(capable, 1, 0)
-    # the broad phase also filters on per-body flags compiled from the geoms: refresh them
-    for b in range(collision_model.nbody):
-        flag = int(capable[collision_model.geom_bodyid == b].any())
-        collision_model.body_contype[b] = flag
-        collision_model.body_conaffinity[b] = flag
-    collision_model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
-    collision_model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+    collision_model = collision.self_collision_model(model)
+    robot_geom = model.geom_bodyid != 0
 
     nominal = np.asarray(robot.nominal_qpos(), dtype=np.float64)
     data = mujoco.MjData(kin_model)
@@ -130,7 +119,7 @@ def index_robot(robot) -> RobotIndex:
         corner_sites=np.array(corners), sole_body=np.array(sole_body),
         actuator_joint=actuator_joint, actuator_is_position=actuator_is_position,
         nominal_qpos=nominal, height_m=height, total_mass=float(kin_model.body_subtreemass[root_body]))
-    index.ignored_body_pairs = _touching_body_pairs(index, nominal)
+    index.ignored_body_pairs = collision.touching_body_pairs(collision_model, nominal)
     return index
 
 
@@ -138,29 +127,7 @@ def body_pairs_in_collision(index: RobotIndex, data: mujoco.MjData, min_depth: f
     """Self-collisions at the pose in ``data`` (``collision_model``): (body1, body2, depth m).
 
     Pairs of a body and its direct parent, pairs touching at the nominal pose (structural
-    overlaps of the model) and contacts shallower than ``min_depth`` are left out.
+    overlaps of the model) and contacts shallower than ``min_depth`` are left out
+    (:mod:`motok_robot.robots.collision`, which retargeting uses too).
     """
-    m = index.collision_model
-    mujoco.mj_kinematics(m, data)
-    mujoco.mj_collision(m, data)
-    found: dict[tuple[int, int], float] = {}
-    for i in range(data.ncon):
-        con = data.contact[i]
-        depth = -float(con.dist)
-        if depth < min_depth:
-            continue
-        b1, b2 = int(m.geom_bodyid[con.geom1]), int(m.geom_bodyid[con.geom2])
-        pair = (min(b1, b2), max(b1, b2))
-        if b1 == b2 or m.body_parentid[b1] == b2 or m.body_parentid[b2] == b1:
-            continue
-        if pair in index.ignored_body_pairs:
-            continue
-        found[pair] = max(found.get(pair, 0.0), depth)
-    return [(a, b, d) for (a, b), d in found.items()]
-
-
-def _touching_body_pairs(index: RobotIndex, qpos: np.ndarray) -> set:
-    data = mujoco.MjData(index.collision_model)
-    data.qpos[:] = qpos
-    index.ignored_body_pairs = set()
-    return {(a, b) for a, b, _ in body_pairs_in_collision(index, data, min_depth=-1e-3)}
+    return collision.body_pairs_in_collision(index.collision_model, data, min_depth, index.ignored_body_pairs)
