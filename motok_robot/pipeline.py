@@ -626,6 +626,9 @@ class Pipeline:
         rt = entry["retargeter"].run(motion.joints, float(motion.fps), progress=False, source="motion.npz")
         files["robot"] = write_robot_npz(tmp / "robot.npz", rt)
         timings["retarget"] = time.perf_counter() - t
+        if rt.collision_pairs:
+            notes.append(f"retargeting: kept {len(rt.collision_pairs)} body part pairs apart that the human motion "
+                         f"drove into each other ({', '.join(rt.collision_pairs)})")
         failed_windows = rt.failed_windows()
         if failed_windows:
             notes.append(f"retargeting: {len(failed_windows)}/{len(rt.windows)} solver windows did not converge "

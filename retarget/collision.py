@@ -7,10 +7,13 @@ forbid them (an active set: a clip without overlaps costs nothing extra).
 
 **Which pairs.** After a solve, the robot trajectory is checked with MuJoCo's own collision
 detection on :func:`motok_robot.robots.collision.self_collision_model` (the model validation
-uses), its geom margins widened by ``CollisionConfig.detect_margin``: every geom pair that
-overlaps *or comes closer than that* in some frame becomes active. Parent/child pairs and body
-pairs that close at the nominal pose are never active (validation ignores parents, children and
-pairs touching at the nominal pose).
+uses), its geom margins widened by ``CollisionConfig.detect_margin`` (default 0: touching):
+every geom pair that overlaps or comes closer than that in some frame becomes active.
+Parent/child pairs and body pairs within 1 mm of each other at the nominal pose (close by
+design) are never active; validation ignores parents, children and pairs overlapping at the
+nominal pose. The rows of a pair depend on the joint angles only (bodies placed relative to
+the base), which keeps the problem's derivatives small; a window problem is compiled once per
+window length and active set (``Retargeter.problem``) and reused for later clips.
 
 **Geometry, per active geom pair** (the geoms' own MJCF shapes):
 
@@ -48,6 +51,7 @@ from motok_robot.robots.collision import geom_pairs_in_collision, self_collision
 from retarget.kinematics import Frames, KinematicTree, quat_to_matrix_np
 
 _EPS = 1e-12
+_BOX_CELLS = 6  # a box's longest side is cut into at most this many cells (one sphere each)
 
 
 @dataclass(frozen=True)
@@ -104,9 +108,10 @@ def geom_spheres(model, g: int) -> Spheres:
     """Spheres that cover geom ``g`` (in its body's frame).
 
     A sphere is itself; a capsule is spheres of its radius along its segment, at most one
-    radius apart; a cylinder, box, ellipsoid or mesh is its box (``geom_aabb``) cut into cells
-    no longer than its smallest half size along the other two axes, one sphere per cell,
-    containing the cell."""
+    radius apart; a cylinder, box, ellipsoid or mesh is its box (``geom_aabb``), whole along its
+    thinnest axis and cut along the other two into cells about as long as its smallest half
+    size (at most ``_BOX_CELLS`` along the longest side), one sphere per cell, containing the
+    cell. The spheres stick out of a flat box by up to about half a cell: conservative."""
     pos, rot = _geom_frame(model, g)
     t, s, body = int(model.geom_type[g]), model.geom_size[g], int(model.geom_bodyid[g])
     if t == mujoco.mjtGeom.mjGEOM_SPHERE:
@@ -122,7 +127,9 @@ def geom_spheres(model, g: int) -> Spheres:
         aabb = np.asarray(model.geom_aabb[g], dtype=np.float64)
         centre, half = pos + rot @ aabb[:3], aabb[3:6]
     thin = int(np.argmin(half))
-    cell = max(float(half[thin]), 1e-6)
+    # cells as thick as the box, but no smaller than a third of its longest side: a thin large
+    # box (a sole) would otherwise need hundreds of spheres (hundreds of rows per frame)
+    cell = max(float(half[thin]), 2 * float(half.max()) / _BOX_CELLS, 1e-6)
     grids, sizes = [], np.zeros(3)
     for i in range(3):
         n = 1 if i == thin else max(1, int(np.ceil(2 * half[i] / cell - 1e-9)))
@@ -185,13 +192,15 @@ def clearance_rows(tree: KinematicTree, frames: Frames, pairs: list[PairGeometry
 class CollisionMonitor:
     """Finds the geom pairs of a robot trajectory that overlap or come closer than ``near`` (m).
 
-    Body pairs that are that close at the nominal pose are close by design and left out, as
-    are parents and children (:mod:`motok_robot.robots.collision`)."""
+    Body pairs closer than ``max(near, touching)`` at the nominal pose are close by design
+    (feet side by side, a servo horn on the next link) and left out, as are parents and
+    children (:mod:`motok_robot.robots.collision`)."""
 
-    def __init__(self, model, nominal_qpos: np.ndarray, near: float):
+    def __init__(self, model, nominal_qpos: np.ndarray, near: float, touching: float = 1e-3):
         self.model = self_collision_model(model, margin=near)
         self.near = float(near)
-        self.ignored = touching_body_pairs(self.model, nominal_qpos, tolerance=self.near)
+        tol = max(self.near, float(touching))
+        self.ignored = touching_body_pairs(self_collision_model(model, margin=tol), nominal_qpos, tolerance=tol)
         self._data = mujoco.MjData(self.model)
 
     def close_pairs(self, qpos: np.ndarray) -> dict[tuple[int, int], float]:

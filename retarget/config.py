@@ -82,17 +82,18 @@ class SwingConfig:
 class CollisionConfig:
     """Self-collision avoidance (``retarget.collision``; metres).
 
-    After a solve, body pairs that overlap or come closer than ``detect_margin`` (MuJoCo's
-    collision detection on the robot's own geoms) get constraint rows that keep them at least
-    ``margin`` apart, and the clip is solved again from that solution; repeated while new pairs
-    come close, at most ``max_rounds`` times. ``enabled=False`` turns it off (the behaviour
+    After a solve, geom pairs that overlap or come closer than ``detect_margin`` (MuJoCo's
+    collision detection on the robot's own geoms; 0 = touching) get constraint rows that keep
+    them at least ``margin`` apart, and the clip is solved again from that solution; repeated
+    while new pairs touch, at most ``max_rounds`` times. A clip that needs it pays the build
+    of a larger window problem (seconds, once per process and active set) and a second solve. ``enabled=False`` turns it off (the behaviour
     before this existed). ``margin`` leaves room for servo tracking error and for the 2 mm depth
     that ``motok-robot validate`` tolerates.
     """
 
     enabled: bool = True
     margin: float = 0.004
-    detect_margin: float = 0.006
+    detect_margin: float = 0.0
     max_rounds: int = 3
 
 

@@ -167,7 +167,10 @@ class RobotKinematics:
         from retarget.collision import clearance_rows
 
         x = ca.SX.sym("x", self.nx)
-        rows, names = clearance_rows(self.tree, _body_frames(self.robot, self.tree, x), list(pairs), margin)
+        # distances between bodies do not depend on where the robot stands: the rows see the
+        # joints only (base at the origin, unrotated), which keeps their derivatives small
+        local = ca.vertcat(ca.SX.zeros(6, 1), x[6:])
+        rows, names = clearance_rows(self.tree, _body_frames(self.robot, self.tree, local), list(pairs), margin)
         return ca.Function("clearance", [x], [ca.vertcat(*rows) if rows else ca.SX.zeros(0, 1)]), names
 
     def qpos_from_x(self, x: np.ndarray) -> np.ndarray:

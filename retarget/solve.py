@@ -284,11 +284,12 @@ class Retargeter:
         """Re-solve the clip with self-collision rows for the geom pairs that come close; the
         active set grows while new pairs come close (``CollisionConfig.max_rounds`` at most).
 
-        A re-solve that leaves more windows failed than the solution it started from is undone
-        (its pairs stay listed). Returns the active geom pairs, the number of re-solves and the
-        window reports of the solution kept in ``x``."""
+        A re-solve that leaves more windows failed than the solution it started from is undone.
+        Returns the geom pairs kept apart in the solution left in ``x`` (none if every re-solve
+        was undone), the number of re-solves tried and the window reports of that solution."""
         cfg = self.config.collision
         active: set = set()
+        kept: set = set()
         rounds = 0
         if not cfg.enabled:
             return [], 0, reports
@@ -306,8 +307,8 @@ class Retargeter:
             if sum(not w.success for w in again) > sum(not w.success for w in reports):
                 x[:] = before
                 break
-            reports = again
-        return sorted(active), rounds, reports
+            reports, kept = again, set(active)
+        return sorted(kept), rounds, reports
 
     def _compiled_superset(self, pairs: set, sizes: set) -> tuple:
         """The smallest pair set that holds ``pairs`` and is compiled for every window size in
