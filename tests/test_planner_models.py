@@ -253,3 +253,43 @@ def test_action_labels_from_index_records():
     assert clip_action({"label": "kick", "source": "bandai"}) == "kick"
     assert clip_action({"source": "bandai", "file": "/d/dataset-2_wave-right-hand_active_003.bvh"}) == "wave-right-hand"
     assert clip_action({"source": "cmu", "file": "/d/01_01.amc"}) is None
+
+
+def test_ar_input_corruption_changes_inputs_not_targets(monkeypatch):
+    """With ``corruption`` the AR loss sees some random input codes (about the asked fraction),
+    never touches padding, and still scores the real next tokens."""
+    torch.manual_seed(0)
+    model = ARPlanner(tiny("ar")).eval()
+    tokens, emb, lengths = _data()
+    cond = Conditions(text_embedding=emb)
+    seen = {}
+    real_logits = model.logits
+
+    def spy(inputs, *a, **kw):
+        seen["inputs"] = inputs.clone()
+        return real_logits(inputs, *a, **kw)
+
+    monkeypatch.setattr(model, "logits", spy)
+    plain = model.loss(tokens, lengths, cond, torch.Generator().manual_seed(0))
+    plain_inputs = seen["inputs"]
+    valid = torch.arange(N)[None] < lengths[:, None]
+    assert torch.equal(plain_inputs[valid], tokens[valid])
+    swapped = []
+    for seed in range(20):
+        corrupted = model.loss(tokens, lengths, cond, torch.Generator().manual_seed(seed), corruption=0.9)
+        inputs = seen["inputs"]
+        assert torch.equal(inputs[~valid], plain_inputs[~valid])  # padding stays padding
+        assert int(inputs[valid].max()) < K  # random codes are real codes, never [END] or [PAD]
+        swapped.append(float((inputs[valid] != tokens[valid]).float().mean()))
+        assert corrupted["count"] == plain["count"]  # the same targets are scored
+    # U(0, 0.9) per sample, minus the 1/K chance of drawing the same code: mean about 0.42
+    assert 0.25 < np.mean(swapped) < 0.6, np.mean(swapped)
+
+
+def test_input_corruption_is_checked(tmp_path):
+    from motok_robot.planner.train import train_planner
+
+    with pytest.raises(InputError, match="input_corruption is for the AR planner"):
+        train_planner(tmp_path / "none", tmp_path / "none", "masked", tmp_path / "run", train_overrides={"input_corruption": 0.3})
+    with pytest.raises(InputError, match=r"input_corruption must be in \[0, 1\)"):
+        train_planner(tmp_path / "none", tmp_path / "none", "ar", tmp_path / "run", train_overrides={"input_corruption": 1.5})

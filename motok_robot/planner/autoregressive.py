@@ -55,12 +55,22 @@ class ARPlanner(Planner):
         seq = seq + self.position_embedding[: length + 1]
         return self.head(self.transformer(seq))
 
-    def loss(self, tokens, lengths, cond, generator, drop=None, ends=None):
+    def loss(self, tokens, lengths, cond, generator, drop=None, ends=None, corruption: float = 0.0):
+        """Next-token cross-entropy (teacher forcing). ``corruption``: each sample replaces a
+        fraction ``U(0, corruption)`` of its *input* tokens with random codes (targets stay the
+        real tokens), so the model learns to continue from its own imperfect samples (the
+        exposure-bias remedy of T2M-GPT)."""
         b, n = tokens.shape
         device = tokens.device
         idx = torch.arange(n + 1, device=device)[None]
         valid = idx[:, :n] < lengths[:, None]
-        inputs = tokens.masked_fill(~valid, self.pad_id)
+        inputs = tokens
+        if corruption > 0:
+            rate = torch.rand(b, 1, generator=generator, device=generator.device) * corruption
+            swap = torch.rand(b, n, generator=generator, device=generator.device) < rate
+            random_codes = torch.randint(0, self.config.codebook_size, (b, n), generator=generator, device=generator.device)
+            inputs = torch.where(swap.to(device), random_codes.to(device), tokens)
+        inputs = inputs.masked_fill(~valid, self.pad_id)
         target = torch.full((b, n + 1), IGNORE, dtype=torch.long, device=device)
         target[:, :n] = torch.where(valid, tokens, torch.full_like(tokens, IGNORE))
         ends = torch.ones(b, dtype=torch.bool, device=device) if ends is None else ends.to(device)

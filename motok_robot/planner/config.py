@@ -102,6 +102,10 @@ class PlannerTrainConfig:
     cond_drop_prob: float = 0.1  #: classifier-free guidance: global condition dropped for this fraction
     action_prob: float = 0.2  #: clips with both texts and an action label train the action path this often
     length_loss_weight: float = 0.1  #: weight of the length estimator's loss
+    #: AR planner: each sample replaces a fraction U(0, this) of its input tokens with random
+    #: codes (targets unchanged; T2M-GPT's remedy for exposure bias). 0 = plain teacher forcing.
+    #: The masked planner has no input tokens to corrupt and must leave it at 0.
+    input_corruption: float = 0.0
     val_every: int = 500  #: steps between validation + checkpoint
     #: True: model.safetensors keeps the weights of the validation with the lowest val loss
     #: (early stopping); False: the latest weights. Resuming always continues from the latest

@@ -119,6 +119,10 @@ def train_planner(
             config.text_encoder = text_encoder
     if device is not None:
         train_cfg.device = device
+    if not 0.0 <= train_cfg.input_corruption < 1.0:
+        raise InputError(f"train config: input_corruption must be in [0, 1) (got {train_cfg.input_corruption})")
+    if kind == "masked" and train_cfg.input_corruption > 0:
+        raise InputError("train config: input_corruption is for the AR planner (the masked planner already trains on masked inputs)")
     dev = torch.device(train_cfg.device)
     torch.manual_seed(train_cfg.seed)
 
@@ -187,7 +191,8 @@ def train_planner(
                                                              action_prob=train_cfg.action_prob)
         cond = cond.to(dev)
         drop = torch.rand(len(idx), generator=generator) < train_cfg.cond_drop_prob
-        out_loss = model.loss(tokens.to(dev), lengths.to(dev), cond, generator, drop=drop.to(dev), ends=ends.to(dev))
+        extra = {"corruption": train_cfg.input_corruption} if train_cfg.input_corruption > 0 else {}
+        out_loss = model.loss(tokens.to(dev), lengths.to(dev), cond, generator, drop=drop.to(dev), ends=ends.to(dev), **extra)
         loss = out_loss["loss"]
         if cond.text_embedding is not None and cond.text_present is not None and bool(cond.text_present.any()):
             has = cond.text_present
