@@ -6,7 +6,7 @@ no video):
 
 * ``before``: no swing-foot constraints and no foot gap (the solver before they existed);
 * ``after``: the defaults;
-* ``zmp300``: the defaults plus the soft ZMP term at weight 300 (op3_like only by default).
+* ``zmp300`` (any ``zmpW``): the defaults plus the soft ZMP term at weight W (op3_like only by default).
 
 Usage::
 
@@ -43,9 +43,9 @@ def variant_config(name: str):
         return replace(d, swing=replace(d.swing, height=0.0), min_foot_gap=None)
     if name == "after":
         return d
-    if name == "zmp300":
-        return replace(d, weights=replace(d.weights, zmp=300.0))
-    raise SystemExit(f"unknown variant {name!r} (before, after, zmp300)")
+    if name.startswith("zmp") and name[3:].isdigit():  # zmp300, zmp1000: the soft ZMP term at that weight
+        return replace(d, weights=replace(d.weights, zmp=float(name[3:])))
+    raise SystemExit(f"unknown variant {name!r} (before, after, zmpWEIGHT such as zmp300)")
 
 
 def find_clips(bandai: Path, cmu: Path) -> list[tuple[str, Path, Path | None]]:
@@ -68,7 +68,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--robots", nargs="+", default=["op3_like", "humanoid25"])
     ap.add_argument("--variants", nargs="+", default=["before", "after", "zmp300"])
-    ap.add_argument("--zmp-robots", nargs="+", default=["op3_like"], help="robots that run the zmp300 variant")
+    ap.add_argument("--zmp-robots", nargs="+", default=["op3_like"], help="robots that run the zmpW variants")
     ap.add_argument("--bandai", type=Path, default=REPO.parent / "scratch" / "raw" / "bandai")
     ap.add_argument("--cmu", type=Path, default=REPO.parent / "scratch" / "raw" / "cmu-asf-amc")
     ap.add_argument("--seconds", type=float, default=6.0)
@@ -94,7 +94,7 @@ def main(argv=None) -> int:
     for robot_name in args.robots:
         robot = load(robot_name)
         for variant in args.variants:
-            if variant == "zmp300" and robot_name not in args.zmp_robots:
+            if variant.startswith("zmp") and robot_name not in args.zmp_robots:
                 continue
             rt = Retargeter(RetargetRobot.from_robot(robot), variant_config(variant))
             for clip, path, asf in clips:

@@ -59,6 +59,12 @@ def register(commands, groups) -> None:
                         help="when the motion is too fast for the servos (the torque, joint_velocity or "
                         "joint_acceleration check fails), play it up to S times slower until those checks pass "
                         "(default %(default)g; 1 = never)")
+    retargeting = parser.add_argument_group("retargeting")
+    retargeting.add_argument("--zmp-weight", type=float, default=0.0, metavar="W",
+                             help="soft cart-table ZMP-over-support term of retargeting (default 0 = off; 1000 lets "
+                                  "a slow Bandai walk pass in physics on op3_like, see docs/retarget.md)")
+    retargeting.add_argument("--no-self-collision", action="store_true",
+                             help="do not keep the robot's body parts apart in retargeting (faster)")
     models = parser.add_argument_group("models")
     models.add_argument("--planner", choices=("masked", "ar"), default="masked", help="planner (default masked)")
     models.add_argument("--tokenizer", type=Path, default=None, help="tokenizer run (default models/tokenizer)")
@@ -117,9 +123,21 @@ def run_command(args: argparse.Namespace) -> int:
         check_playback(playback, args.port)
         check_out_dir(args.out, args.overwrite)
     generation = {"cfg_scale": args.cfg} if args.cfg is not None else {}
+    if not args.zmp_weight >= 0:  # also rejects NaN
+        raise InputError(f"--zmp-weight must be >= 0, got {args.zmp_weight}")
+    retarget_config = None
+    if args.zmp_weight > 0 or args.no_self_collision:
+        from dataclasses import replace
+
+        from retarget.config import RetargetConfig
+
+        d = RetargetConfig()
+        retarget_config = replace(d, weights=replace(d.weights, zmp=float(args.zmp_weight)),
+                                  collision=replace(d.collision, enabled=not args.no_self_collision))
     pipe = Pipeline(PipelineConfig(planner=args.planner, tokenizer_run=args.tokenizer, planner_run=args.planner_run,
                                    device=args.device, generation=generation, plots=not args.no_plots,
-                                   realtime=args.realtime, sim_video=args.sim_video, max_retime=args.max_retime))
+                                   realtime=args.realtime, sim_video=args.sim_video, max_retime=args.max_retime,
+                                   retarget=retarget_config))
     if args.prompts is not None:
         return _run_batch(pipe, prompts, args, robot, playback)
 

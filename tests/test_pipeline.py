@@ -238,6 +238,7 @@ def test_cli_invalid_input_is_one_line_before_any_work(runs, tmp_path, capsys):
         (["run", "a person walks", "--prompts", str(tmp_path / "p.txt"), "--out", str(out)], "not both"),
         (["run", "--prompts", str(tmp_path / "p.txt"), "--out", str(out)], "file not found"),
         (["run", "a person walks", "--sim-video", "--out", str(out)], "--sim-video needs --sim"),
+        (["run", "a person walks", "--zmp-weight", "-1", "--out", str(out)], "--zmp-weight must be >= 0"),
     ]
     for argv, message in cases:
         assert main(argv + _model_args(runs)) == 2, argv
@@ -483,3 +484,25 @@ def test_text_limit_matches_the_text_encoder_and_import_is_light():
             "print(sorted(m for m in ('torch', 'mujoco', 'casadi', 'matplotlib') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "[]"
+
+
+def test_cli_retargeting_options_reach_the_retargeter(tmp_path, monkeypatch):
+    import motok_robot.pipeline as pipeline
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def capture(self, config=None):
+        seen["config"] = config
+        raise Stop
+
+    monkeypatch.setattr(pipeline.Pipeline, "__init__", capture)
+    with pytest.raises(Stop):
+        main(["run", "--motion", "m.npz", "--zmp-weight", "1000", "--no-self-collision", "--out", str(tmp_path / "o")])
+    retarget = seen["config"].retarget
+    assert retarget.weights.zmp == 1000.0 and not retarget.collision.enabled
+    with pytest.raises(Stop):
+        main(["run", "--motion", "m.npz", "--out", str(tmp_path / "o")])
+    assert seen["config"].retarget is None  # the defaults: ZMP term off, self-collision avoidance on
