@@ -86,9 +86,9 @@ class CollisionConfig:
     collision detection on the robot's own geoms; 0 = touching) get constraint rows that keep
     them at least ``margin`` apart, and the clip is solved again from that solution; repeated
     while new pairs touch, at most ``max_rounds`` times. A clip that needs it pays the build
-    of a larger window problem (seconds, once per process and active set) and a second solve. ``enabled=False`` turns it off (the behaviour
-    before this existed). ``margin`` leaves room for servo tracking error and for the 2 mm depth
-    that ``motok-robot validate`` tolerates.
+    of a larger window problem (seconds, once per process and active set) and a second solve.
+    ``enabled=False`` turns it off (the behaviour before this existed). ``margin`` leaves room
+    for servo tracking error and for the 2 mm depth that ``motok-robot validate`` tolerates.
     """
 
     enabled: bool = True
