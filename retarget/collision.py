@@ -127,7 +127,7 @@ def geom_spheres(model, g: int) -> Spheres:
         aabb = np.asarray(model.geom_aabb[g], dtype=np.float64)
         centre, half = pos + rot @ aabb[:3], aabb[3:6]
     thin = int(np.argmin(half))
-    # cells as thick as the box, but no smaller than a third of its longest side: a thin large
+    # cells as thick as the box, but no shorter than a sixth of its longest side: a thin large
     # box (a sole) would otherwise need hundreds of spheres (hundreds of rows per frame)
     cell = max(float(half[thin]), 2 * float(half.max()) / _BOX_CELLS, 1e-6)
     grids, sizes = [], np.zeros(3)

@@ -127,7 +127,7 @@ def write_robot_npz(path: str | Path, result) -> Path:
         source=np.asarray(result.source, dtype=np.float32),
         solver_status=np.array(json.dumps(status)),
         retime_factor=np.array(float(getattr(result, "retime_factor", 1.0))),
-        collision_pairs=np.array(list(getattr(result, "collision_pairs", [])), dtype=str).reshape(-1),
+        collision_pairs=np.array(list(result.collision_pairs), dtype=str).reshape(-1),
     )
     return path
 

@@ -89,7 +89,11 @@ def body_pairs_in_collision(model: mujoco.MjModel, data: mujoco.MjData, min_dept
 
 
 def touching_body_pairs(model: mujoco.MjModel, qpos: np.ndarray, tolerance: float = 1e-3) -> set:
-    """Body pairs of a :func:`self_collision_model` within ``tolerance`` (m) of touching at ``qpos``."""
+    """Body pairs of a :func:`self_collision_model` within ``tolerance`` (m) of touching at ``qpos``.
+
+    MuJoCo reports only pairs closer than the model's contact margin, so the tolerance reaches
+    no further than the ``margin`` the model was made with: with ``margin=0`` (validation's
+    model) these are the pairs that touch or overlap."""
     data = mujoco.MjData(model)
     data.qpos[:] = qpos
     return {(a, b) for a, b, _ in body_pairs_in_collision(model, data, min_depth=-tolerance)}
