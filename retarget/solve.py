@@ -15,7 +15,7 @@ warm-started from the previous frame (the IK baseline).
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -101,15 +101,12 @@ def scaled_contact_config(joints: np.ndarray, config: ContactConfig) -> ContactC
     r = float(np.median(leg_length(joints)) / leg_length(rest_pose()))
     if not np.isfinite(r) or r <= 0:
         return config
-    return ContactConfig(
+    return replace(
+        config,
         toe_height=config.toe_height * r,
         ankle_height=config.ankle_height * r,
         enter_speed=config.enter_speed * r,
         exit_speed=config.exit_speed * r,
-        min_contact_frames=config.min_contact_frames,
-        min_swing_frames=config.min_swing_frames,
-        floor_percentile=config.floor_percentile,
-        floor_height=config.floor_height,
     )
 
 

@@ -256,6 +256,22 @@ def test_contact_hysteresis_and_min_length():
     assert c[:, 1].all()
 
 
+def test_scaled_contact_config_scales_only_the_body_size_thresholds():
+    from dataclasses import fields
+
+    from retarget.solve import scaled_contact_config
+
+    child = rest_pose()[None] * 0.5  # half the canonical adult's size
+    base = ContactConfig(min_contact_frames=5, min_swing_frames=4, floor_percentile=7.0, floor_height=0.01)
+    scaled = scaled_contact_config(child, base)
+    scaled_names = {"toe_height", "ankle_height", "enter_speed", "exit_speed"}
+    for f in fields(ContactConfig):
+        if f.name in scaled_names:
+            assert getattr(scaled, f.name) == pytest.approx(0.5 * getattr(base, f.name))
+        else:  # every other setting (also ones added later) passes through unchanged
+            assert getattr(scaled, f.name) == getattr(base, f.name), f.name
+
+
 def test_self_retarget_recovers_robot_motion(robot):
     rng = np.random.default_rng(3)
     T = 40
