@@ -104,7 +104,7 @@ class SolverConfig:
     tol: float = 1e-4  # IPOPT's scaled optimality error; the objective is ~1e3 per window
     acceptable_tol: float = 1e-4
     constr_viol_tol: float = 1e-6  # metres / radians: contact equalities hold to a micrometre
-    max_iter: int = 200
+    max_iter: int = 500  # windows take 20-30 iterations; a self-collision re-solve of a hard window took 203
     hessian: str = "exact"  # or "gauss-newton" (objective only + exact constraint curvature), "limited-memory"
     linear_solver: str = "mumps"
     mu_strategy: str = "adaptive"

@@ -19,8 +19,11 @@ PLANNERS = ["masked", "ar"]
 #: run as strict expected failures for exactly that file (a retrained model is checked normally,
 #: and if the shipped one starts passing the test fails so the entry gets removed). Measured over
 #: seeds 0-5 for the AR planner shipped on 2026-11-22: bow > 30 deg in 2 of 6, both hands up in
-#: 3 of 6 (the masked planner: 5 of 6 and 6 of 6); see the note of the planner issue.
+#: 3 of 6 (the masked planner: 5 of 6 and 6 of 6); see the note of the planner issue. The masked
+#: planner shipped then hops where it should walk (measured 2026-11-25, docs/retarget.md).
 KNOWN_MISSES = {
+    "edb59cb5339d88e8": {"walk_not_hop": "the shipped masked planner's walks have 12-55 % of frames with neither "
+                                         "foot down over seeds 0-5 (22 % with seed 0 at 6 s); docs/retarget.md"},
     "ba0682131936b6f1": {"bow": "the shipped AR planner bows in 2 of 6 seeds, not with seed 0",
                          "raise_both_hands": "the shipped AR planner raises both hands in 3 of 6 seeds, not with seed 0"},
 }
@@ -89,6 +92,18 @@ def test_walk_forward_travels_with_alternating_feet(kind):
     lead = np.einsum("td,td->t", j[:, J["left_ankle"], :2] - j[:, J["right_ankle"], :2], fwd)
     steps = _crossings(lead, dead=0.05)
     assert steps >= 4, f"feet swapped the lead only {steps} times in 6 s"
+
+
+@pytest.mark.parametrize("kind", PLANNERS)
+def test_walk_forward_keeps_a_foot_on_the_ground(kind, request):
+    """A walk, not a hop: real Bandai walks have 0-4 % of frames (per style) with neither foot in
+    contact, runs 9-69 %; a robot cannot play frames without support."""
+    _expect_known_miss(request, kind, "walk_not_hop")
+    from retarget.contacts import detect_contacts
+
+    j = _generate(kind, "a person walks forward", 6.0)
+    flight = float((~detect_contacts(j, float(FPS)).any(axis=1)).mean())
+    assert flight <= 0.1, f"neither foot on the ground in {flight:.0%} of frames"
 
 
 @pytest.mark.parametrize("kind", PLANNERS)
