@@ -118,3 +118,19 @@ def test_bench_all_ignores_stale_json_of_a_failed_run(tmp_path, monkeypatch):
     assert outcome.status == "failed (exit 1)" and outcome.json_path is None
     bench_all.write_report([outcome], tmp_path / "R.md", results, "x")
     assert "stale" not in (tmp_path / "R.md").read_text()
+
+
+def test_gait_quality_splits_unplanted_frames_into_airborne_and_sliding():
+    import gait_quality
+
+    from motok_robot.motion.skeleton import rest_pose
+
+    T = 60
+    j = np.tile(rest_pose(), (T, 1, 1)).astype(np.float64)
+    assert gait_quality.unplanted_shares(j, 20.0) == {"unplanted": 0.0, "airborne": 0.0, "sliding": 0.0}
+    j[10:20, :, 2] += 0.4  # the whole body in the air for 10 frames
+    j[40:50, :, 0] += np.arange(10)[:, None] * 0.1  # 2 m/s across the floor, feet down: sliding
+    shares = gait_quality.unplanted_shares(j, 20.0)
+    assert shares["airborne"] == pytest.approx(10 / T)
+    assert shares["sliding"] >= 8 / T and shares["sliding"] <= 12 / T  # central differences blur the ends
+    assert shares["unplanted"] == pytest.approx(shares["airborne"] + shares["sliding"])

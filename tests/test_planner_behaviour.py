@@ -96,7 +96,7 @@ def test_walk_forward_travels_with_alternating_feet(kind):
 
 @pytest.mark.parametrize("kind", PLANNERS)
 def test_walk_forward_keeps_a_foot_planted(kind, request):
-    """A walk plants its feet: real Bandai walks have 0-4 % of frames (per style) with neither
+    """A walk plants its feet: real Bandai walks have 0-2 % of frames (per style) with neither
     foot in contact (near the floor and nearly still), runs 9-69 %; without a planted foot a
     robot has nothing to stand on."""
     _expect_known_miss(request, kind, "walk_planted")
