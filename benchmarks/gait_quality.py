@@ -32,15 +32,10 @@ PROMPTS = ("a person walks forward", "a person walks and turns left")
 
 def unplanted_shares(joints: np.ndarray, fps: float) -> dict[str, float]:
     """Shares of frames of ``joints[T, 22, 3]`` with no foot planted, airborne and sliding."""
-    from retarget.config import ContactConfig
-    from retarget.contacts import FOOT_JOINTS, SIDES, detect_contacts
+    from retarget.contacts import detect_contacts, near_floor
 
-    cfg = ContactConfig()
-    none = ~detect_contacts(joints, fps, cfg).any(axis=1)
-    toe = np.stack([joints[:, FOOT_JOINTS[s][1], 2] for s in SIDES], axis=1)
-    ankle = np.stack([joints[:, FOOT_JOINTS[s][0], 2] for s in SIDES], axis=1)
-    floor = float(np.percentile(np.minimum(toe, ankle).min(axis=1), cfg.floor_percentile))
-    near = ((toe - floor <= cfg.toe_height) | (ankle - floor <= cfg.ankle_height)).any(axis=1)
+    none = ~detect_contacts(joints, fps).any(axis=1)
+    near = near_floor(joints).any(axis=1)
     return {"unplanted": float(none.mean()), "airborne": float((none & ~near).mean()),
             "sliding": float((none & near).mean())}
 

@@ -37,24 +37,33 @@ def contact_phases(mask: np.ndarray) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in _runs(np.asarray(mask, dtype=bool))]
 
 
-def detect_contacts(joints: np.ndarray, fps: float, config: ContactConfig = ContactConfig()) -> np.ndarray:
-    """Contact mask ``[T, 2]`` (bool; columns left, right) of ``joints[T, 22, 3]`` (metres, z up)."""
+def near_floor(joints: np.ndarray, config: ContactConfig = ContactConfig()) -> np.ndarray:
+    """``[T, 2]`` bool (left, right): the toe within ``toe_height`` or the ankle within
+    ``ankle_height`` of the floor (``config.floor_height``, or the ``floor_percentile``-th
+    percentile of the lowest foot joint over the clip) -- the height half of contact detection."""
     joints = np.asarray(joints, dtype=np.float64)
-    T = joints.shape[0]
     foot_z = joints[:, [i for side in SIDES for i in FOOT_JOINTS[side]], 2]
     if config.floor_height is not None:
         floor = float(config.floor_height)
     else:
-        floor = float(np.percentile(foot_z.min(axis=1), config.floor_percentile)) if T else 0.0
+        floor = float(np.percentile(foot_z.min(axis=1), config.floor_percentile)) if len(joints) else 0.0
+    return np.stack([(joints[:, toe, 2] - floor <= config.toe_height) | (joints[:, ankle, 2] - floor <= config.ankle_height)
+                     for ankle, toe in (FOOT_JOINTS[side] for side in SIDES)], axis=1)
+
+
+def detect_contacts(joints: np.ndarray, fps: float, config: ContactConfig = ContactConfig()) -> np.ndarray:
+    """Contact mask ``[T, 2]`` (bool; columns left, right) of ``joints[T, 22, 3]`` (metres, z up)."""
+    joints = np.asarray(joints, dtype=np.float64)
+    T = joints.shape[0]
+    near = near_floor(joints, config)
     out = np.zeros((T, 2), dtype=bool)
     for col, side in enumerate(SIDES):
         ankle, toe = FOOT_JOINTS[side]
-        near = (joints[:, toe, 2] - floor <= config.toe_height) | (joints[:, ankle, 2] - floor <= config.ankle_height)
         speed = np.minimum(_horizontal_speed(joints[:, ankle], fps), _horizontal_speed(joints[:, toe], fps))
         state = False
         for t in range(T):
             limit = config.exit_speed if state else config.enter_speed
-            state = bool(near[t] and speed[t] <= limit)
+            state = bool(near[t, col] and speed[t] <= limit)
             out[t, col] = state
         out[:, col] = _clean(out[:, col], config.min_contact_frames, config.min_swing_frames)
     return out
