@@ -343,3 +343,41 @@ def test_by_default_the_latest_weights_are_kept(runs, tmp_path, monkeypatch):
               if k.startswith("model.")}
     kept = load_file(str(out / "model.safetensors"))
     assert kept and all(torch.equal(latest[k], v) for k, v in kept.items())
+
+
+def test_token_phases_add_shifted_token_grids(runs, tmp_path):
+    """``phases`` > 1 tokenises every clip again from frames 1.. on: one more sequence per offset,
+    whose features are the clip's own shifted by that many frames (views, not copies)."""
+    from motok_robot.errors import InputError
+    from motok_robot.planner.data import load_planner_data, open_dataset
+
+    class FrameCounter:  # a "tokenizer" whose tokens say how many frames it was given
+        frames_per_token = 4
+
+        def parameters(self):
+            yield torch.zeros(1)
+
+        def encode(self, feats):
+            return torch.full((1, feats.shape[1] // 4), feats.shape[1], dtype=torch.long)
+
+    class Texts:
+        name, dim = "fake", 3
+
+        def encode(self, texts):
+            return torch.zeros(len(texts), 3)
+
+    data = load_planner_data(runs / "data", "train", FrameCounter(), "fake", Texts(), tmp_path, [], 16, phases=3)
+    dataset = open_dataset(runs / "data", "train")
+    by_id = {c.clip_id: c for c in data.clips}
+    assert set(by_id) == {f"{cid}{suffix}" for cid in dataset.clip_ids for suffix in ("", "@1", "@2")}
+    for cid in dataset.clip_ids:
+        frames = np.asarray(dataset.features(cid))
+        for offset, suffix in enumerate(("", "@1", "@2")):
+            clip = by_id[cid + suffix]
+            usable = (len(frames) - offset) // 4 * 4
+            assert clip.tokens.tolist() == [usable] * (usable // 4)
+            np.testing.assert_array_equal(clip.features, frames[offset:offset + usable].astype(np.float16))
+            assert clip.text_rows == by_id[cid].text_rows
+            assert offset == 0 or np.shares_memory(clip.features, by_id[cid].features)
+    with pytest.raises(InputError, match="token phases must be in 1..4"):
+        load_planner_data(runs / "data", "train", FrameCounter(), "fake", Texts(), tmp_path, [], 16, phases=5)

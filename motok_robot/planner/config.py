@@ -106,6 +106,10 @@ class PlannerTrainConfig:
     #: codes (targets unchanged; T2M-GPT's remedy for exposure bias). 0 = plain teacher forcing.
     #: The masked planner has no input tokens to corrupt and must leave it at 0.
     input_corruption: float = 0.0
+    #: each training clip is also tokenised from frames 1 .. token_phases - 1 on (at most the
+    #: tokenizer's frames per token): the same motion through shifted token grids, so the
+    #: planner sees ``token_phases`` token sequences per clip.  1 = the clip's own grid only.
+    token_phases: int = 1
     val_every: int = 500  #: steps between validation + checkpoint
     #: True: model.safetensors keeps the weights of the validation with the lowest val loss
     #: (early stopping); False: the latest weights. Resuming always continues from the latest

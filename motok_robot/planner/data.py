@@ -60,8 +60,12 @@ def open_dataset(data_dir: str | Path, split: str):
     return PreparedDataset(data_dir, split)
 
 
-def tokenise_split(dataset, tokenizer, cache_file: Path, key: str, batch_frames: int = 4096) -> dict[str, np.ndarray]:
-    """Tokens of every clip of ``dataset`` (cached in ``cache_file`` under ``key``) -> ``{id: tokens [N]}``."""
+def tokenise_split(dataset, tokenizer, cache_file: Path, key: str, offset: int = 0) -> dict[str, np.ndarray]:
+    """Tokens of every clip of ``dataset`` (cached in ``cache_file`` under ``key``) -> ``{id: tokens [N]}``.
+
+    ``offset``: the clip is tokenised from that frame on (a token grid shifted by ``offset``
+    frames); clips with less than one token left are skipped.
+    """
     if cache_file.is_file():
         with np.load(cache_file, allow_pickle=False) as z:
             if str(z["key"]) == key:
@@ -71,7 +75,7 @@ def tokenise_split(dataset, tokenizer, cache_file: Path, key: str, batch_frames:
     out: dict[str, np.ndarray] = {}
     device = next(tokenizer.parameters()).device
     for clip_id in tqdm(list(dataset.clip_ids), desc=f"tokenising {cache_file.stem}", unit="clip", disable=None):
-        feats = np.asarray(dataset.features(clip_id), dtype=np.float32)
+        feats = np.asarray(dataset.features(clip_id), dtype=np.float32)[offset:]
         usable = (feats.shape[0] // ds) * ds
         if usable < ds:
             continue
@@ -222,28 +226,43 @@ class PlannerData:
 
 def load_planner_data(
     data_dir: str | Path, split: str, tokenizer, tokenizer_key: str, encoder, cache_dir: Path,
-    action_labels: list[str], max_tokens: int,
+    action_labels: list[str], max_tokens: int, phases: int = 1,
 ) -> PlannerData:
-    """Tokenise (cached), embed texts (cached) and assemble :class:`PlannerData` for ``split``."""
+    """Tokenise (cached), embed texts (cached) and assemble :class:`PlannerData` for ``split``.
+
+    ``phases`` > 1 also tokenises every clip from frames ``1 .. phases - 1`` on (at most
+    ``downsample - 1``): the same motion seen through shifted token grids, each one more
+    training sequence (a clip id gets the suffix ``@<offset>``).
+    """
     dataset = open_dataset(data_dir, split)
     index = Path(data_dir) / "index.jsonl"
     stat = index.stat()
     key = f"{tokenizer_key}|{Path(data_dir).resolve()}|{split}|{stat.st_size}|{stat.st_mtime_ns}"
-    token_map = tokenise_split(dataset, tokenizer, cache_dir / f"tokens_{split}.npz", key)
     ds = tokenizer.frames_per_token
+    if not 1 <= phases <= ds:
+        raise InputError(f"token phases must be in 1..{ds} (the tokenizer's frames per token), got {phases}")
+    token_maps = {0: tokenise_split(dataset, tokenizer, cache_dir / f"tokens_{split}.npz", key)}
+    for offset in range(1, phases):
+        token_maps[offset] = tokenise_split(dataset, tokenizer, cache_dir / f"tokens_{split}_offset{offset}.npz",
+                                            f"{key}|offset {offset}", offset=offset)
     texts_per_clip: dict[str, list[str]] = {}
-    for clip_id in token_map:
+    for clip_id in token_maps[0]:
         texts_per_clip[clip_id] = [t for t in (normalise_text(x) for x in dataset.texts(clip_id)) if t][:32]
     unique = sorted({t for ts in texts_per_clip.values() for t in ts})
     table = embed_texts(unique, encoder, cache_dir)
     row_of = {t: i for i, t in enumerate(unique)}
     label_index = {label: i for i, label in enumerate(action_labels)}
     clips = []
-    for clip_id, tokens in tqdm(token_map.items(), desc=f"loading {split}", unit="clip", disable=None):
-        feats = np.asarray(dataset.features(clip_id), dtype=np.float32)[: len(tokens) * ds]
-        label = clip_action(dataset.record(clip_id))
-        clips.append(TokenisedClip(clip_id, tokens, feats.astype(np.float16),
-                                   [row_of[t] for t in texts_per_clip[clip_id]], label_index.get(label, -1)))
+    for clip_id, tokens in tqdm(token_maps[0].items(), desc=f"loading {split}", unit="clip", disable=None):
+        feats = np.asarray(dataset.features(clip_id), dtype=np.float16)
+        label = label_index.get(clip_action(dataset.record(clip_id)), -1)
+        rows = [row_of[t] for t in texts_per_clip[clip_id]]
+        clips.append(TokenisedClip(clip_id, tokens, feats[: len(tokens) * ds], rows, label))
+        for offset in range(1, phases):
+            shifted = token_maps[offset].get(clip_id)
+            if shifted is not None:  # views of the same array: no extra copy of the features
+                clips.append(TokenisedClip(f"{clip_id}@{offset}", shifted,
+                                           feats[offset: offset + len(shifted) * ds], rows, label))
     return PlannerData(clips, table, ds, max_tokens)
 
 

@@ -146,7 +146,7 @@ def train_planner(
 
     cache = out / "cache"
     train_data = load_planner_data(data_dir, "train", tokenizer, tokenizer_key, encoder, cache,
-                                   config.action_labels, config.max_tokens)
+                                   config.action_labels, config.max_tokens, phases=train_cfg.token_phases)
     try:
         val_data = load_planner_data(data_dir, "val", tokenizer, tokenizer_key, encoder, cache,
                                      config.action_labels, config.max_tokens)
