@@ -286,10 +286,59 @@ def test_ar_input_corruption_changes_inputs_not_targets(monkeypatch):
     assert 0.25 < np.mean(swapped) < 0.6, np.mean(swapped)
 
 
-def test_input_corruption_is_checked(tmp_path):
+def test_training_switches_are_checked(tmp_path):
     from motok_robot.planner.train import train_planner
 
     with pytest.raises(InputError, match="input_corruption is for the AR planner"):
         train_planner(tmp_path / "none", tmp_path / "none", "masked", tmp_path / "run", train_overrides={"input_corruption": 0.3})
     with pytest.raises(InputError, match=r"input_corruption must be in \[0, 1\)"):
         train_planner(tmp_path / "none", tmp_path / "none", "ar", tmp_path / "run", train_overrides={"input_corruption": 1.5})
+    with pytest.raises(InputError, match="masked_loss_average must be 'token' or 'sample'"):
+        train_planner(tmp_path / "none", tmp_path / "none", "masked", tmp_path / "run", train_overrides={"masked_loss_average": "clip"})
+    with pytest.raises(InputError, match="masked_loss_average is for the masked planner"):
+        train_planner(tmp_path / "none", tmp_path / "none", "ar", tmp_path / "run", train_overrides={"masked_loss_average": "sample"})
+
+
+def test_token_conv_does_not_read_padding():
+    """With ``token_conv_kernel`` padding past a sample's length reads as the sequence's end
+    (zero), so a padded sample equals the same sample alone; the kernel is checked."""
+    torch.manual_seed(0)
+    model = MaskedPlanner(tiny("masked", token_conv_kernel=3)).eval()
+    torch.nn.init.normal_(model.token_conv.weight, std=0.3)
+    emb = torch.randn(1, D)
+    tokens = torch.randint(0, K, (1, 6))
+    alone = model.logits(tokens, torch.tensor([6]), Conditions(text_embedding=emb))
+    padded = torch.cat([tokens, torch.full((1, 4), model.pad_id)], dim=1)
+    batch = model.logits(padded, torch.tensor([6]), Conditions(text_embedding=emb))
+    torch.testing.assert_close(batch[:, :6], alone, atol=1e-5, rtol=1e-5)
+    for bad, kind, match in ((4, "masked", "0 or odd"), (-1, "masked", "0 or odd"), (3, "ar", "masked planner only")):
+        with pytest.raises(InputError, match=match):
+            tiny(kind, token_conv_kernel=bad).validate()
+
+
+def test_masked_loss_per_sample_weighs_every_sample_equally():
+    """``per_sample``: the mean over samples of each sample's mean masked-token cross-entropy
+    (recomputed here from the same mask draws); the default is the mean over all masked tokens."""
+    import torch.nn.functional as F
+
+    from motok_robot.planner.sampling import cosine_mask_ratio
+
+    torch.manual_seed(0)
+    model = MaskedPlanner(tiny("masked")).eval()
+    tokens, emb, lengths = _data()
+    cond = Conditions(text_embedding=emb)
+    per_sample = model.loss(tokens, lengths, cond, torch.Generator().manual_seed(5), per_sample=True)
+    pooled = model.loss(tokens, lengths, cond, torch.Generator().manual_seed(5))
+    g = torch.Generator().manual_seed(5)  # the draws of MaskedPlanner.loss, in its order
+    b, n = tokens.shape
+    valid = torch.arange(n)[None] < lengths[:, None]
+    n_mask = torch.minimum(torch.ceil(cosine_mask_ratio(torch.rand(b, generator=g)) * lengths).clamp(min=1).long(), lengths)
+    rank = torch.rand(b, n, generator=g).masked_fill(~valid, 2.0).argsort(1).argsort(1)
+    masked = (rank < n_mask[:, None]) & valid
+    inputs = torch.where(masked, torch.full_like(tokens, model.mask_id), tokens).masked_fill(~valid, model.pad_id)
+    ce = F.cross_entropy(model.logits(inputs, lengths, cond).transpose(1, 2), tokens, reduction="none")
+    assert len(set(masked.sum(1).tolist())) > 1  # samples differ in how many tokens are masked
+    torch.testing.assert_close(per_sample["loss"], torch.stack([ce[i][masked[i]].mean() for i in range(b)]).mean())
+    torch.testing.assert_close(pooled["loss"], ce[masked].mean())
+    assert not torch.isclose(per_sample["loss"], pooled["loss"])
+    assert float(per_sample["accuracy"]) == float(pooled["accuracy"])

@@ -43,6 +43,9 @@ class PlannerConfig:
     action_labels: list[str] = field(default_factory=list)  #: action classes with a learned embedding
     local_hidden: int = 128  #: hidden width of the local-condition conv encoder
     length_hidden: int = 256  #: hidden width of the length estimator MLP
+    #: masked planner: kernel of a convolution over the token embeddings before the transformer
+    #: (odd; 0 = none), so that every position sees its neighbours' tokens from the first layer
+    token_conv_kernel: int = 0
 
     @property
     def max_tokens(self) -> int:
@@ -65,6 +68,11 @@ class PlannerConfig:
             raise InputError(f"planner config: max_frames {self.max_frames} < downsample {self.downsample}")
         if not 0.0 <= self.dropout < 1.0:
             raise InputError(f"planner config: dropout must be in [0, 1) (got {self.dropout})")
+        if self.token_conv_kernel < 0 or (self.token_conv_kernel and self.token_conv_kernel % 2 == 0):
+            raise InputError(f"planner config: token_conv_kernel must be 0 or odd (got {self.token_conv_kernel})")
+        if self.token_conv_kernel and self.kind != "masked":
+            raise InputError("planner config: token_conv_kernel is for the masked planner only (the AR planner "
+                             "decodes one token at a time)")
         if len(set(self.action_labels)) != len(self.action_labels):
             raise InputError("planner config: action_labels contains duplicates")
         return self
@@ -106,6 +114,11 @@ class PlannerTrainConfig:
     #: codes (targets unchanged; T2M-GPT's remedy for exposure bias). 0 = plain teacher forcing.
     #: The masked planner has no input tokens to corrupt and must leave it at 0.
     input_corruption: float = 0.0
+    #: masked planner: "token" averages the loss over every masked token of a batch (heavily
+    #: masked samples dominate); "sample" averages each sample's masked tokens first, so a
+    #: lightly masked sample, where the neighbours decide the answer, counts as much as a
+    #: heavily masked one (the masked-diffusion ELBO's weighting).
+    masked_loss_average: str = "token"
     #: each training clip is also tokenised from frames 1 .. token_phases - 1 on (at most the
     #: tokenizer's frames per token): the same motion through shifted token grids, so the
     #: planner sees ``token_phases`` token sequences per clip.  1 = the clip's own grid only.

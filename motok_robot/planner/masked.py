@@ -33,6 +33,8 @@ class MaskedPlanner(Planner):
     def __init__(self, config: PlannerConfig) -> None:
         super().__init__(config)
         self.head = nn.Linear(config.width, config.codebook_size)
+        k = config.token_conv_kernel
+        self.token_conv = nn.Conv1d(config.width, config.width, k, padding=k // 2) if k else None
 
     @property
     def mask_id(self) -> int:
@@ -49,13 +51,21 @@ class MaskedPlanner(Planner):
         x = self.token_embedding(tokens)
         if cond.local is not None:
             x = x + self.local_encoder(cond.local, n)
+        valid = torch.arange(n, device=tokens.device)[None] < lengths[:, None]
+        if self.token_conv is not None:  # neighbours' tokens; padding is zero, as past the sequence's ends
+            x = x * valid[..., None]
+            x = x + self.token_conv(x.transpose(1, 2)).transpose(1, 2)
         g = self.global_encoder(cond, drop)
         seq = torch.cat([g[:, None], x], dim=1) + self.position_embedding[: n + 1]
-        valid = torch.arange(n, device=tokens.device)[None] < lengths[:, None]
         valid = torch.cat([torch.ones(b, 1, dtype=torch.bool, device=tokens.device), valid], dim=1)
         return self.head(self.transformer(seq, valid)[:, 1:])
 
-    def loss(self, tokens, lengths, cond, generator, drop=None, ends=None):
+    def loss(self, tokens, lengths, cond, generator, drop=None, ends=None, per_sample: bool = False):
+        """Cross-entropy of the masked tokens.  ``per_sample``: the loss is each sample's mean over
+        its masked tokens, averaged over samples, so a lightly masked sample (much context, few
+        targets) weighs as much as a heavily masked one (the weighting of the masked-diffusion
+        ELBO); otherwise the mean over every masked token of the batch, where heavily masked
+        samples dominate.  ``accuracy`` is always over all masked tokens."""
         b, n = tokens.shape
         device = tokens.device
         valid = torch.arange(n, device=device)[None] < lengths[:, None]
@@ -71,7 +81,11 @@ class MaskedPlanner(Planner):
         logits = self.logits(inputs, lengths, cond, drop)
         target = tokens[masked]
         picked = logits[masked]
-        loss = F.cross_entropy(picked, target)
+        if per_sample:
+            per_token = F.cross_entropy(logits.transpose(1, 2), tokens.masked_fill(~masked, 0), reduction="none")
+            loss = ((per_token * masked).sum(1) / masked.sum(1).clamp(min=1)).mean()
+        else:
+            loss = F.cross_entropy(picked, target)
         accuracy = (picked.argmax(-1) == target).float().mean()
         return {"loss": loss, "accuracy": accuracy, "count": torch.tensor(float(target.numel()))}
 

@@ -123,6 +123,10 @@ def train_planner(
         raise InputError(f"train config: input_corruption must be in [0, 1) (got {train_cfg.input_corruption})")
     if kind == "masked" and train_cfg.input_corruption > 0:
         raise InputError("train config: input_corruption is for the AR planner (the masked planner already trains on masked inputs)")
+    if train_cfg.masked_loss_average not in ("token", "sample"):
+        raise InputError(f"train config: masked_loss_average must be 'token' or 'sample' (got {train_cfg.masked_loss_average!r})")
+    if kind == "ar" and train_cfg.masked_loss_average != "token":
+        raise InputError("train config: masked_loss_average is for the masked planner")
     dev = torch.device(train_cfg.device)
     torch.manual_seed(train_cfg.seed)
 
@@ -192,6 +196,8 @@ def train_planner(
         cond = cond.to(dev)
         drop = torch.rand(len(idx), generator=generator) < train_cfg.cond_drop_prob
         extra = {"corruption": train_cfg.input_corruption} if train_cfg.input_corruption > 0 else {}
+        if train_cfg.masked_loss_average == "sample":
+            extra["per_sample"] = True
         out_loss = model.loss(tokens.to(dev), lengths.to(dev), cond, generator, drop=drop.to(dev), ends=ends.to(dev), **extra)
         loss = out_loss["loss"]
         if cond.text_embedding is not None and cond.text_present is not None and bool(cond.text_present.any()):
