@@ -342,3 +342,21 @@ def test_masked_loss_per_sample_weighs_every_sample_equally():
     torch.testing.assert_close(pooled["loss"], ce[masked].mean())
     assert not torch.isclose(per_sample["loss"], pooled["loss"])
     assert float(per_sample["accuracy"]) == float(pooled["accuracy"])
+
+
+def test_token_conv_defaults_per_kind_and_old_runs_load_without_it(tmp_path):
+    import json
+
+    from motok_robot.planner.checkpoint import load_planner, save_planner_weights, write_run_config
+    from motok_robot.planner.config import MASKED_TOKEN_CONV_KERNEL
+
+    assert PlannerConfig(kind="masked").validate().token_conv_kernel == MASKED_TOKEN_CONV_KERNEL
+    assert PlannerConfig(kind="ar").validate().token_conv_kernel == 0
+    model = build_planner(tiny("masked", token_conv_kernel=0))
+    save_planner_weights(model, tmp_path)
+    write_run_config(tmp_path, model.config, {})
+    data = json.loads((tmp_path / "config.json").read_text())
+    del data["planner"]["token_conv_kernel"]  # a run written before the field existed
+    (tmp_path / "config.json").write_text(json.dumps(data))
+    loaded, _ = load_planner(tmp_path)
+    assert loaded.token_conv is None and loaded.config.token_conv_kernel == 0

@@ -24,7 +24,7 @@ from motok_robot import checkpoint as _shared
 from motok_robot.checkpoint import CONFIG_FILE, WEIGHTS_FILE, atomic_save_tensors, atomic_write_text, load_checked_weights
 from motok_robot.errors import InputError
 from motok_robot.planner.base import Planner
-from motok_robot.planner.config import FORMAT, FORMAT_VERSION, PlannerConfig, planner_config_from_dict, to_dict
+from motok_robot.planner.config import FORMAT, FORMAT_VERSION, PlannerConfig, saved_planner_config, to_dict
 
 __all__ = ["CONFIG_FILE", "WEIGHTS_FILE", "atomic_write_text", "build_planner", "load_planner", "read_run_config",
            "save_planner_weights", "write_run_config"]
@@ -66,7 +66,7 @@ def load_planner(run_dir: str | Path, device: str | torch.device = "cpu") -> tup
     if run_dir.is_file():
         run_dir = run_dir.parent
     data = read_run_config(run_dir)
-    config = planner_config_from_dict(data["planner"], where=f"{run_dir / CONFIG_FILE} 'planner'")
+    config = saved_planner_config(data["planner"], where=f"{run_dir / CONFIG_FILE} 'planner'")
     weights = run_dir / WEIGHTS_FILE
     if not weights.is_file():
         raise InputError(f"{weights}: planner weights not found (training has not written a checkpoint yet?)")

@@ -16,6 +16,8 @@ from motok_robot.config_utils import dataclass_from_dict, dataclass_to_dict
 from motok_robot.errors import InputError
 
 PLANNER_KINDS = ("masked", "ar")
+#: ``PlannerConfig.token_conv_kernel`` of a masked planner when not set
+MASKED_TOKEN_CONV_KERNEL = 5
 FORMAT = "motok-planner"
 FORMAT_VERSION = 1
 
@@ -44,8 +46,11 @@ class PlannerConfig:
     local_hidden: int = 128  #: hidden width of the local-condition conv encoder
     length_hidden: int = 256  #: hidden width of the length estimator MLP
     #: masked planner: kernel of a convolution over the token embeddings before the transformer
-    #: (odd; 0 = none), so that every position sees its neighbours' tokens from the first layer
-    token_conv_kernel: int = 0
+    #: (odd; 0 = none), so that every position sees its neighbours' tokens from the first layer.
+    #: None = the kind's default: 5 for the masked planner, 0 for the AR planner (which decodes
+    #: one token at a time).  Without it the masked planner trained on the shared data ignored
+    #: the tokens around a gap in locomotion (docs/planner.md, "What the planners learned").
+    token_conv_kernel: int | None = None
 
     @property
     def max_tokens(self) -> int:
@@ -68,6 +73,8 @@ class PlannerConfig:
             raise InputError(f"planner config: max_frames {self.max_frames} < downsample {self.downsample}")
         if not 0.0 <= self.dropout < 1.0:
             raise InputError(f"planner config: dropout must be in [0, 1) (got {self.dropout})")
+        if self.token_conv_kernel is None:
+            self.token_conv_kernel = MASKED_TOKEN_CONV_KERNEL if self.kind == "masked" else 0
         if self.token_conv_kernel < 0 or (self.token_conv_kernel and self.token_conv_kernel % 2 == 0):
             raise InputError(f"planner config: token_conv_kernel must be 0 or odd (got {self.token_conv_kernel})")
         if self.token_conv_kernel and self.kind != "masked":
@@ -161,6 +168,12 @@ def _from_dict(cls, data: dict[str, Any], where: str):
 
 def planner_config_from_dict(data: dict[str, Any], where: str = "planner config") -> PlannerConfig:
     return _from_dict(PlannerConfig, data, where).validate()
+
+
+def saved_planner_config(data: dict[str, Any], where: str) -> PlannerConfig:
+    """The architecture saved in a run's ``config.json``.  Runs written before a field existed
+    were built without what it adds: a missing ``token_conv_kernel`` means no convolution."""
+    return planner_config_from_dict({"token_conv_kernel": 0, **data}, where)
 
 
 def train_config_from_dict(data: dict[str, Any], where: str = "train config") -> PlannerTrainConfig:

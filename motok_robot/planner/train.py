@@ -26,7 +26,7 @@ from motok_robot.planner.checkpoint import (
     tokenizer_record, write_run_config,
 )
 from motok_robot.planner.config import (
-    PlannerConfig, PlannerTrainConfig, planner_config_from_dict, to_dict, train_config_from_dict,
+    PlannerConfig, PlannerTrainConfig, planner_config_from_dict, saved_planner_config, to_dict, train_config_from_dict,
 )
 from motok_robot.planner.data import PlannerData, action_labels_of, load_planner_data
 
@@ -97,7 +97,7 @@ def train_planner(
         if not ckpt.is_file():
             raise InputError(f"--resume: {ckpt} not found (start a new run without --resume)")
         saved = read_run_config(out)
-        config = planner_config_from_dict(saved["planner"], where=f"{out / CONFIG_FILE} 'planner'")
+        config = saved_planner_config(saved["planner"], where=f"{out / CONFIG_FILE} 'planner'")
         train_cfg = train_config_from_dict(saved.get("train", {}), where=f"{out / CONFIG_FILE} 'train'")
         if config.kind != kind:
             raise InputError(f"--resume: {out} is a {config.kind!r} planner run, not {kind!r}")
