@@ -19,11 +19,9 @@ PLANNERS = ["masked", "ar"]
 #: run as strict expected failures for exactly that file (a retrained model is checked normally,
 #: and if the shipped one starts passing the test fails so the entry gets removed). Measured over
 #: seeds 0-5 for the AR planner shipped on 2026-11-22: bow > 30 deg in 2 of 6, both hands up in
-#: 3 of 6 (the masked planner: 5 of 6 and 6 of 6); see the note of the planner issue. The masked
-#: planner shipped then slides and hops where it should walk (measured 2026-11-25, docs/retarget.md).
+#: 3 of 6; see the note of the planner issue. (The masked planner shipped before 2026-11-25
+#: slid and hopped where it should walk; the one shipped since plants its feet.)
 KNOWN_MISSES = {
-    "edb59cb5339d88e8": {"walk_planted": "the shipped masked planner's walks have no foot planted in 12-55 % of "
-                                         "frames over seeds 0-5 (22 % with seed 0 at 6 s); docs/retarget.md"},
     "ba0682131936b6f1": {"bow": "the shipped AR planner bows in 2 of 6 seeds, not with seed 0",
                          "raise_both_hands": "the shipped AR planner raises both hands in 3 of 6 seeds, not with seed 0"},
 }
