@@ -134,3 +134,48 @@ def test_gait_quality_splits_unplanted_frames_into_airborne_and_sliding():
     assert shares["airborne"] == pytest.approx(10 / T)
     assert shares["sliding"] >= 8 / T and shares["sliding"] <= 12 / T  # central differences blur the ends
     assert shares["unplanted"] == pytest.approx(shares["airborne"] + shares["sliding"])
+
+
+def test_planner_context_counts_every_usable_token_and_scores_an_oracle_at_one():
+    """``planner_context.context_accuracy`` on stub clips: clips shorter than two tokens are
+    skipped, longer ones cut to the planner's longest plan; planners that return the truth
+    score 1 on all three measures (infill, text only, AR next token)."""
+    import planner_context
+    import torch
+
+    K = 8
+    truth_of = {}
+
+    class Tokenizer:
+        frames_per_token = 4
+
+        def encode(self, feats):
+            n = feats.shape[1] // 4
+            tokens = torch.arange(n)[None] % K
+            truth_of["tokens"] = tokens
+            return tokens
+
+    class Oracle:  # both planners: one-hot logits of the clip's true tokens at every position
+        mask_id = K
+        config = type("C", (), {"max_tokens": 5, "codebook_size": K})()
+
+        def logits(self, tokens, *args):
+            truth = truth_of["tokens"][0]
+            rows = tokens.shape[0]
+            return torch.nn.functional.one_hot(truth, K + 1).float()[None].expand(rows, -1, -1)
+
+    class Texts:
+        def encode(self, texts):
+            return torch.zeros(len(texts), 3)
+
+    class Dataset:
+        frames = {"short": 7, "mid": 12, "long": 40}
+
+        def features(self, clip_id):
+            return np.zeros((self.frames[clip_id], 263), np.float32)
+
+        def texts(self, clip_id):
+            return ["a caption"]
+
+    acc = planner_context.context_accuracy(Oracle(), Oracle(), Tokenizer(), Texts(), Dataset(), ["short", "mid", "long"])
+    assert acc == {"tokens": 3 + 5, "infill": 1.0, "text_only": 1.0, "ar_next": 1.0}
