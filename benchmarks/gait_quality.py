@@ -17,7 +17,6 @@ reference. Prints a table and writes JSON with the machine description
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -63,19 +62,21 @@ def generated_rows(planners: list[str], prompts: list[str], seeds: int) -> list[
 
 def reference_rows(data: Path) -> list[dict]:
     """Bandai Namco walks (every walk-* content) and runs, per style mean (originals, no mirrors)."""
+    from motok_robot.data.dataset import PreparedDataset
+    from motok_robot.planner.data import clip_action
+
+    dataset = PreparedDataset(data, "all")
     by_style: dict[str, dict[str, list[dict]]] = {"walks": defaultdict(list), "runs": defaultdict(list)}
-    for line in (data / "index.jsonl").read_text().splitlines():
-        clip = json.loads(line)
-        if clip["source"] != "bandai" or clip.get("mirror_of"):
+    for clip_id in dataset.clip_ids:
+        record = dataset.record(clip_id)
+        if record["source"] != "bandai" or record.get("mirror_of"):
             continue
-        parts = clip["id"].split("/")[-1].split("_")  # dataset-N_content_style_take
-        if len(parts) < 3:
-            continue
-        group = "walks" if parts[1].startswith("walk") else "runs" if parts[1] == "run" else None
+        content = clip_action(record) or ""
+        group = "walks" if content.startswith("walk") else "runs" if content == "run" else None
         if group is None:
             continue
-        joints = np.load(data / "joints" / (clip["id"].replace("/", "__") + ".npy"))
-        by_style[group][parts[2]].append(unplanted_shares(joints, float(clip["fps"])))
+        style = clip_id.split("/")[-1].split("_")[2]  # dataset-N_content_style_take
+        by_style[group][style].append(unplanted_shares(dataset.joints(clip_id), float(record["fps"])))
     rows = []
     for group, styles in by_style.items():
         if not styles:
