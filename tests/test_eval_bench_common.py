@@ -137,7 +137,7 @@ def test_gait_quality_splits_unplanted_frames_into_airborne_and_sliding():
 
 
 def test_planner_context_counts_every_usable_token_and_scores_an_oracle_at_one():
-    """``planner_context.context_accuracy`` on stub clips: clips shorter than two tokens are
+    """``planner_context.context_accuracy`` on in-memory clips: clips shorter than two tokens are
     skipped, longer ones cut to the planner's longest plan; planners that return the truth
     score 1 on all three measures (infill, text only, AR next token)."""
     import planner_context

@@ -182,6 +182,10 @@ def train_planner(
             csv.writer(fh).writerow(METRIC_FIELDS)
     best_loss = _best_val_loss(metrics_path, step) if resume else float("inf")
 
+    # the kind-specific loss switches (the masked and AR losses take different keywords)
+    loss_options: dict = {"corruption": train_cfg.input_corruption} if train_cfg.input_corruption > 0 else {}
+    if train_cfg.masked_loss_average == "sample":
+        loss_options["per_sample"] = True
     model.train()
     t0 = time.time()
     running_loss, running_acc, running_n = 0.0, 0.0, 0
@@ -195,10 +199,8 @@ def train_planner(
                                                              action_prob=train_cfg.action_prob)
         cond = cond.to(dev)
         drop = torch.rand(len(idx), generator=generator) < train_cfg.cond_drop_prob
-        extra = {"corruption": train_cfg.input_corruption} if train_cfg.input_corruption > 0 else {}
-        if train_cfg.masked_loss_average == "sample":
-            extra["per_sample"] = True
-        out_loss = model.loss(tokens.to(dev), lengths.to(dev), cond, generator, drop=drop.to(dev), ends=ends.to(dev), **extra)
+        out_loss = model.loss(tokens.to(dev), lengths.to(dev), cond, generator, drop=drop.to(dev), ends=ends.to(dev),
+                              **loss_options)
         loss = out_loss["loss"]
         if cond.text_embedding is not None and cond.text_present is not None and bool(cond.text_present.any()):
             has = cond.text_present
