@@ -381,3 +381,39 @@ def test_token_phases_add_shifted_token_grids(runs, tmp_path):
             assert offset == 0 or np.shares_memory(clip.features, by_id[cid].features)
     with pytest.raises(InputError, match="token phases must be in 1..4"):
         load_planner_data(runs / "data", "train", FrameCounter(), "fake", Texts(), tmp_path, [], 16, phases=5)
+
+
+def test_balance_groups_draws_rare_labels_more_often():
+    """``balance_groups`` weights a group of n clips (same action label, else same first caption)
+    by n ** (1 - balance): 0 keeps uniform draws, 1 draws every group equally often."""
+    from motok_robot.planner.data import PlannerData, TokenisedClip
+
+    def clip(cid, action, rows):
+        return TokenisedClip(cid, np.zeros(3, dtype=np.int64), np.zeros((12, 263), np.float16), rows, action)
+
+    clips = ([clip(f"walk{i}", 0, [0]) for i in range(8)] + [clip("bow", 1, [1]), clip("bow@1", 1, [1])]
+             + [clip("cmu_a", -1, [2]), clip("cmu_b", -1, [2]), clip("cmu_c", -1, [3]), clip("silent", -1, [])])
+    data = PlannerData(clips, torch.zeros(4, 3), 4, 8)
+    assert data.sampling_probabilities(0.0) is None
+    p = data.sampling_probabilities(1.0)
+    groups = {"walk": p[:8].sum(), "bow": p[8:10].sum(), "caption 2": p[10:12].sum(), "caption 3": p[12], "silent": p[13]}
+    np.testing.assert_allclose(list(groups.values()), [0.2] * 5)
+    half = data.sampling_probabilities(0.5)
+    assert half.sum() == pytest.approx(1.0)
+    # square-root balancing: 8 walks weigh sqrt(8), the 2 bow sequences sqrt(2)
+    assert half[:8].sum() / half[8:10].sum() == pytest.approx(2.0)
+    assert half[0] < half[8] < half[13]
+
+
+def test_balance_groups_trains_and_is_checked(runs, tmp_path):
+    from motok_robot.errors import InputError
+    from motok_robot.planner.train import train_planner
+
+    with pytest.raises(InputError, match=r"balance_groups must be in \[0, 1\]"):
+        train_planner(tmp_path / "none", tmp_path / "none", "ar", tmp_path / "run", train_overrides={"balance_groups": 2})
+    out = train_planner(runs / "data", runs / "tok", "ar", tmp_path / "balanced", seed=1,
+                        planner_overrides=TINY_PLANNER["planner"],
+                        train_overrides={**TINY_PLANNER["train"], "steps": 2, "val_every": 2, "balance_groups": 1.0})
+    saved = json.loads((out / "config.json").read_text())
+    assert saved["train"]["balance_groups"] == 1.0
+    assert (out / "model.safetensors").is_file()

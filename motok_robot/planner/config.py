@@ -130,6 +130,11 @@ class PlannerTrainConfig:
     #: tokenizer's frames per token): the same motion through shifted token grids, so the
     #: planner sees ``token_phases`` token sequences per clip.  1 = the clip's own grid only.
     token_phases: int = 1
+    #: how training draws clips: a group of ``n`` clips with the same action label (or, without
+    #: one, the same first caption) is drawn with total weight ``n ** (1 - balance_groups)``.
+    #: 0 = every clip equally often (the shipped runs: 888 "raise the left hand" clips against
+    #: 28 bows and 2 kicks); 1 = every group equally often; 0.5 = square-root balancing.
+    balance_groups: float = 0.0
     val_every: int = 500  #: steps between validation + checkpoint
     #: True: model.safetensors keeps the weights of the validation with the lowest val loss
     #: (early stopping); False: the latest weights. Resuming always continues from the latest

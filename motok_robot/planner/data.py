@@ -164,6 +164,28 @@ class PlannerData:
     def lengths(self) -> np.ndarray:
         return np.array([len(c.tokens) for c in self.clips])
 
+    def group_of(self, i: int) -> tuple:
+        """What the clip shows, for balancing: its action label, else its first sentence, else its id."""
+        clip = self.clips[i]
+        if clip.action >= 0:
+            return ("action", clip.action)
+        if clip.text_rows:
+            return ("text", clip.text_rows[0])
+        return ("clip", clip.clip_id.split("@")[0])
+
+    def sampling_probabilities(self, balance: float) -> np.ndarray | None:
+        """Probability of drawing each clip when a group of ``n`` clips is drawn with total weight
+        ``n ** (1 - balance)``: 0 = every clip equally often (returns None), 1 = every group
+        (action label or caption) equally often, 0.5 = square-root balancing."""
+        if balance == 0:
+            return None
+        groups = [self.group_of(i) for i in range(len(self.clips))]
+        counts: dict[tuple, int] = {}
+        for g in groups:
+            counts[g] = counts.get(g, 0) + 1
+        weights = np.array([counts[g] ** -float(balance) for g in groups], dtype=np.float64)
+        return weights / weights.sum()
+
     def batch(
         self,
         indices: list[int],

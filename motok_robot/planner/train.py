@@ -127,6 +127,8 @@ def train_planner(
         raise InputError(f"train config: masked_loss_average must be 'token' or 'sample' (got {train_cfg.masked_loss_average!r})")
     if kind == "ar" and train_cfg.masked_loss_average != "token":
         raise InputError("train config: masked_loss_average is for the masked planner")
+    if not 0.0 <= train_cfg.balance_groups <= 1.0:
+        raise InputError(f"train config: balance_groups must be in [0, 1] (got {train_cfg.balance_groups})")
     dev = torch.device(train_cfg.device)
     torch.manual_seed(train_cfg.seed)
 
@@ -159,6 +161,7 @@ def train_planner(
         val_data = train_data
     del tokenizer
 
+    draw_p = train_data.sampling_probabilities(train_cfg.balance_groups)
     model = build_planner(config).to(dev)
     decay = [p for n, p in model.named_parameters() if p.dim() >= 2]
     no_decay = [p for n, p in model.named_parameters() if p.dim() < 2]
@@ -194,7 +197,10 @@ def train_planner(
         lr = _lr_at(step, train_cfg)
         for group in optimiser.param_groups:
             group["lr"] = lr
-        idx = rng.integers(0, len(train_data), size=train_cfg.batch_size).tolist()
+        if draw_p is None:
+            idx = rng.integers(0, len(train_data), size=train_cfg.batch_size).tolist()
+        else:
+            idx = rng.choice(len(train_data), size=train_cfg.batch_size, p=draw_p).tolist()
         tokens, lengths, ends, cond, full = train_data.batch(idx, rng, train_cfg.control,
                                                              action_prob=train_cfg.action_prob)
         cond = cond.to(dev)
