@@ -21,6 +21,7 @@ from pathlib import Path
 
 def register(commands, groups) -> None:
     from motok_robot.pipeline import PipelineConfig  # light: no torch, mujoco or casadi at import
+    from retarget.cli import add_balance_arguments  # light: no casadi at import
 
     parser = commands.add_parser(
         "run", help="one command: text -> motion -> robot trajectory -> MuJoCo validation -> playback",
@@ -59,12 +60,7 @@ def register(commands, groups) -> None:
                         help="when the motion is too fast for the servos (the torque, joint_velocity or "
                         "joint_acceleration check fails), play it up to S times slower until those checks pass "
                         "(default %(default)g; 1 = never)")
-    retargeting = parser.add_argument_group("retargeting")
-    retargeting.add_argument("--zmp-weight", type=float, default=0.0, metavar="W",
-                             help="soft cart-table ZMP-over-support term of retargeting (default 0 = off; 1000 lets "
-                                  "a slow Bandai walk pass in physics on op3_like, see docs/retarget.md)")
-    retargeting.add_argument("--no-self-collision", action="store_true",
-                             help="do not keep the robot's body parts apart in retargeting (faster)")
+    add_balance_arguments(parser.add_argument_group("retargeting"))
     models = parser.add_argument_group("models")
     models.add_argument("--planner", choices=("masked", "ar"), default="masked", help="planner (default masked)")
     models.add_argument("--tokenizer", type=Path, default=None, help="tokenizer run (default models/tokenizer)")
@@ -90,6 +86,7 @@ def run_command(args: argparse.Namespace) -> int:
         check_seconds, check_seed, check_text, read_prompts,
     )
     from motok_robot.robots import DEFAULT_ROBOT
+    from retarget.cli import balance_config
 
     robot = args.robot or DEFAULT_ROBOT
     playback = "sim" if args.sim else "port" if args.port else "dry-run"
@@ -123,17 +120,7 @@ def run_command(args: argparse.Namespace) -> int:
         check_playback(playback, args.port)
         check_out_dir(args.out, args.overwrite)
     generation = {"cfg_scale": args.cfg} if args.cfg is not None else {}
-    if not args.zmp_weight >= 0:  # also rejects NaN
-        raise InputError(f"--zmp-weight must be >= 0, got {args.zmp_weight}")
-    retarget_config = None
-    if args.zmp_weight > 0 or args.no_self_collision:
-        from dataclasses import replace
-
-        from retarget.config import RetargetConfig
-
-        d = RetargetConfig()
-        retarget_config = replace(d, weights=replace(d.weights, zmp=float(args.zmp_weight)),
-                                  collision=replace(d.collision, enabled=not args.no_self_collision))
+    retarget_config = balance_config(args)
     pipe = Pipeline(PipelineConfig(planner=args.planner, tokenizer_run=args.tokenizer, planner_run=args.planner_run,
                                    device=args.device, generation=generation, plots=not args.no_plots,
                                    realtime=args.realtime, sim_video=args.sim_video, max_retime=args.max_retime,

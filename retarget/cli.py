@@ -36,12 +36,45 @@ def register(commands, groups) -> None:
                    help=f"mid-swing clearance of the lowest sole corner in metres (default {d.swing.height}; 0 = no swing-foot constraints)")
     p.add_argument("--foot-gap", type=float, default=d.min_foot_gap, metavar="LEGS",
                    help=f"smallest gap between the inner sole edges across the heading, robot leg lengths (default {d.min_foot_gap}; negative = off)")
-    p.add_argument("--com-weight", type=float, default=d.weights.com, help=f"soft CoM-over-support weight (default {d.weights.com} = off)")
-    p.add_argument("--zmp-weight", type=float, default=d.weights.zmp, help=f"soft cart-table ZMP-over-support weight (default {d.weights.zmp} = off; 300 measured in docs/retarget.md)")
-    p.add_argument("--no-self-collision", action="store_true",
-                   help="do not keep the robot's bodies apart (faster; the validator's self_collision check may then fail)")
+    add_balance_arguments(p)
     p.add_argument("--plot", default=None, metavar="FILE.png", help="also draw the result (targets vs robot, sole heights, errors)")
     p.set_defaults(func=run)
+
+
+def add_balance_arguments(parser) -> None:
+    """The retargeting options ``motok-robot run`` shares: balance terms, contact support, self-collision."""
+    from retarget.config import RetargetConfig
+    from retarget.contacts import SUPPORT_MODES
+
+    d = RetargetConfig()
+    parser.add_argument("--com-weight", type=float, default=d.weights.com, metavar="W",
+                        help=f"soft CoM-over-support weight (default {d.weights.com:g} = off)")
+    parser.add_argument("--zmp-weight", type=float, default=d.weights.zmp, metavar="W",
+                        help=f"soft cart-table ZMP-over-support weight (default {d.weights.zmp:g} = off; 1000 lets a slow "
+                             "walk pass in physics on op3_like, see docs/retarget.md)")
+    parser.add_argument("--support", choices=SUPPORT_MODES, default=d.contacts.support,
+                        help="frames where no human foot is planted: 'always' plants the lower robot foot (no flight "
+                             "phase), 'near' only where a foot is near the floor, 'off' leaves both feet up "
+                             f"(default {d.contacts.support})")
+    parser.add_argument("--no-self-collision", action="store_true",
+                        help="do not keep the robot's bodies apart (faster; the validator's self_collision check may then fail)")
+
+
+def balance_config(args: argparse.Namespace, config=None):
+    """``config`` (default: :class:`RetargetConfig`) with the options of :func:`add_balance_arguments`."""
+    from dataclasses import replace
+
+    from motok_robot.errors import InputError
+    from retarget.config import RetargetConfig
+
+    config = config or RetargetConfig()
+    for name in ("com_weight", "zmp_weight"):
+        value = getattr(args, name)
+        if not value >= 0:  # also rejects NaN
+            raise InputError(f"--{name.replace('_', '-')} must be >= 0, got {value}")
+    return replace(config, weights=replace(config.weights, com=float(args.com_weight), zmp=float(args.zmp_weight)),
+                   contacts=replace(config.contacts, support=args.support),
+                   collision=replace(config.collision, enabled=not args.no_self_collision))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -58,17 +91,13 @@ def run(args: argparse.Namespace) -> int:
         RetargetConfig(), window=args.window, overlap=args.overlap, mode=args.mode,
         allow_partial=args.allow_partial, scale=not args.no_scale,
     )
-    for name in ("swing_height", "com_weight", "zmp_weight"):
-        value = getattr(args, name)
-        if not value >= 0:  # also rejects NaN
-            raise InputError(f"--{name.replace('_', '-')} must be >= 0, got {value}")
+    if not args.swing_height >= 0:  # also rejects NaN
+        raise InputError(f"--swing-height must be >= 0, got {args.swing_height}")
     gap = args.foot_gap
     if gap is not None and gap != gap:  # NaN
         raise InputError("--foot-gap must be a number")
-    config = replace(config, min_foot_gap=None if gap is None or gap < 0 else gap,
-                     swing=replace(config.swing, height=args.swing_height),
-                     weights=replace(config.weights, com=args.com_weight, zmp=args.zmp_weight),
-                     collision=replace(config.collision, enabled=not args.no_self_collision))
+    config = replace(balance_config(args, config), min_foot_gap=None if gap is None or gap < 0 else gap,
+                     swing=replace(config.swing, height=args.swing_height))
     motion = read_input(args.input, skeleton=args.skeleton, asf=args.asf)
     robot = load_robot(args.robot)
     import time

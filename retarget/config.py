@@ -21,6 +21,14 @@ class ContactConfig:
     ``min_swing_frames`` between two contacts are filled.  Defaults suit walking mocap of an
     adult at 20 fps: a planted foot of a walking person moves < 0.1 m/s at the heel or toe,
     a swinging foot 1-4 m/s.
+
+    ``support`` decides what the *robot* does in frames where neither human foot is planted
+    (:func:`retarget.contacts.fill_support`): ``"off"`` keeps both feet in the air there (the
+    robot floats); ``"near"`` plants the lower foot in such frames where a foot is near the
+    floor (a sliding or shuffling foot becomes a planted one; a jump's flight stays a flight);
+    ``"always"`` plants the lower foot in every such frame (a run becomes a fast walk).  A
+    servo humanoid cannot glide on a sliding sole, and a robot with both soles 2 cm up fails
+    ``motok-robot validate``'s floating check.
     """
 
     toe_height: float = 0.06
@@ -31,6 +39,7 @@ class ContactConfig:
     min_swing_frames: int = 2
     floor_percentile: float = 2.0
     floor_height: float | None = None  # metres; None = estimate (floor_percentile) from the clip
+    support: str = "near"  # "off" | "near" | "always": plant a foot in frames where none is planted
 
 
 @dataclass(frozen=True)

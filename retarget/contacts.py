@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from motok_robot.errors import InputError
 from motok_robot.motion.skeleton import JOINT_INDEX
 from retarget.config import ContactConfig
 
@@ -37,18 +38,74 @@ def contact_phases(mask: np.ndarray) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in _runs(np.asarray(mask, dtype=bool))]
 
 
-def near_floor(joints: np.ndarray, config: ContactConfig = ContactConfig()) -> np.ndarray:
-    """``[T, 2]`` bool (left, right): the toe within ``toe_height`` or the ankle within
-    ``ankle_height`` of the floor (``config.floor_height``, or the ``floor_percentile``-th
-    percentile of the lowest foot joint over the clip) -- the height half of contact detection."""
+SUPPORT_MODES = ("off", "near", "always")
+
+
+def foot_height_ratio(joints: np.ndarray, config: ContactConfig = ContactConfig()) -> np.ndarray:
+    """``[T, 2]`` (left, right): how high each foot is, as the smaller of toe height / ``toe_height``
+    and ankle height / ``ankle_height`` above the floor (``config.floor_height``, or the
+    ``floor_percentile``-th percentile of the lowest foot joint over the clip); <= 1 is near the floor."""
     joints = np.asarray(joints, dtype=np.float64)
     foot_z = joints[:, [i for side in SIDES for i in FOOT_JOINTS[side]], 2]
     if config.floor_height is not None:
         floor = float(config.floor_height)
     else:
         floor = float(np.percentile(foot_z.min(axis=1), config.floor_percentile)) if len(joints) else 0.0
-    return np.stack([(joints[:, toe, 2] - floor <= config.toe_height) | (joints[:, ankle, 2] - floor <= config.ankle_height)
+    return np.stack([np.minimum((joints[:, toe, 2] - floor) / config.toe_height,
+                                (joints[:, ankle, 2] - floor) / config.ankle_height)
                      for ankle, toe in (FOOT_JOINTS[side] for side in SIDES)], axis=1)
+
+
+def near_floor(joints: np.ndarray, config: ContactConfig = ContactConfig()) -> np.ndarray:
+    """``[T, 2]`` bool (left, right): the toe within ``toe_height`` or the ankle within
+    ``ankle_height`` of the floor -- the height half of contact detection."""
+    return foot_height_ratio(joints, config) <= 1.0
+
+
+def fill_support(contacts: np.ndarray, joints: np.ndarray, config: ContactConfig = ContactConfig()) -> np.ndarray:
+    """``contacts[T, 2]`` with a foot planted in frames where none is (``config.support``).
+
+    In each run of frames without contact, the eligible frames (``"near"``: a foot is near the
+    floor; ``"always"``: all) get the lower foot (:func:`foot_height_ratio`) planted.  Choices
+    shorter than ``min_contact_frames`` take their neighbour's foot (the phase planted right
+    before or after the run counts as a neighbour), so the filled frames extend or start phases
+    instead of flickering between feet.  ``"off"`` returns the
+    mask unchanged.
+    """
+    if config.support not in SUPPORT_MODES:
+        raise InputError(f"contact support must be one of {SUPPORT_MODES} (got {config.support!r})")
+    out = np.array(contacts, dtype=bool, copy=True)
+    if config.support == "off" or not len(out):
+        return out
+    ratio = foot_height_ratio(joints, config)
+    eligible = ~out.any(axis=1)
+    if config.support == "near":
+        eligible &= (ratio <= 1.0).any(axis=1)
+    n = max(1, int(config.min_contact_frames))
+    for a, b in _runs(eligible):
+        # the foot planted right before / after the run counts as a long run of that choice, so a
+        # few frames that extend its phase are not "short"
+        before = [int(np.argmax(out[a - 1]))] * n if a > 0 and out[a - 1].sum() == 1 else []
+        after = [int(np.argmax(out[b]))] * n if b < len(out) and out[b].sum() == 1 else []
+        choice = np.concatenate([before, np.argmin(ratio[a:b], axis=1), after]).astype(int)
+        _merge_short(choice, n)
+        out[np.arange(a, b), choice[len(before):len(choice) - len(after)]] = True
+    return out
+
+
+def _merge_short(choice: np.ndarray, min_len: int) -> None:
+    """In place: runs of equal values in ``choice`` shorter than ``min_len`` take the value of the
+    longer neighbouring run (the only run stays as it is)."""
+    while True:
+        edges = np.flatnonzero(np.diff(choice)) + 1
+        starts, stops = np.r_[0, edges], np.r_[edges, len(choice)]
+        short = [(k, stops[k] - starts[k]) for k in range(len(starts)) if stops[k] - starts[k] < min_len]
+        if len(starts) < 2 or not short:
+            return
+        k = min(short, key=lambda kv: kv[1])[0]
+        left = stops[k - 1] - starts[k - 1] if k > 0 else -1
+        right = stops[k + 1] - starts[k + 1] if k + 1 < len(starts) else -1
+        choice[starts[k]:stops[k]] = choice[starts[k - 1]] if left >= right else choice[starts[k + 1]]
 
 
 def detect_contacts(joints: np.ndarray, fps: float, config: ContactConfig = ContactConfig()) -> np.ndarray:

@@ -21,7 +21,9 @@ def swing_clearance(contacts: np.ndarray, fps: float, config: SwingConfig = Swin
     from the nearest contact frame (``d = 1`` next to it) gets
     ``lift + (height - lift) * smoothstep((d - 1) / ramp)`` metres, ``ramp = ramp_seconds * fps``
     frames (at least 1). Only
-    contact phases inside the clip count: a clip that starts or ends in swing has no ramp there.
+    contact phases inside the clip count: a clip that starts or ends in swing has no ramp there,
+    and a foot that never touches the ground while the other one does (a one-legged stance, a
+    kick) is held ``height`` up throughout.  A clip in which neither foot touches gets no clearance.
     """
     c = np.asarray(contacts, dtype=bool)
     T = len(c)
@@ -32,8 +34,8 @@ def swing_clearance(contacts: np.ndarray, fps: float, config: SwingConfig = Swin
     lift, height = min(config.lift, config.height), config.height
     for s in range(2):
         for a, b in contact_phases(~c[:, s]):  # swing runs [a, b)
-            if a == 0 and b == T:
-                continue  # the foot never touches the ground: nothing to clear
+            if a == 0 and b == T and not c[:, 1 - s].any():
+                continue  # neither foot ever touches the ground: nothing to clear
             t = np.arange(a, b)
             d = np.minimum(t - a + 1 if a > 0 else np.full(len(t), np.inf), b - t if b < T else np.full(len(t), np.inf))
             u = np.clip((d - 1.0) / ramp, 0.0, 1.0)

@@ -256,6 +256,74 @@ def test_contact_hysteresis_and_min_length():
     assert c[:, 1].all()
 
 
+def _sliding_feet_clip(T: int = 30) -> np.ndarray:
+    """Rest pose; left foot planted for frames 0-9, then both feet slide along the floor (near it
+    but too fast to count as planted) with the right foot 1 cm lower in frames 10-19 and the left
+    lower in 20-24, then both feet 30 cm up (a flight) in frames 25-29."""
+    j = np.tile(rest_pose(), (T, 1, 1))
+    feet = {s: [JOINT_INDEX[f"{s}_ankle"], JOINT_INDEX[f"{s}_foot"]] for s in ("left", "right")}
+    j[:10, feet["right"], 2] += 0.3  # right swings while left stands
+    for t in range(10, 25):
+        for s in ("left", "right"):
+            j[t, feet[s], 0] += 0.06 * (t - 9)  # 1.2 m/s: sliding
+        lower = "right" if t < 20 else "left"
+        j[t, feet["left" if lower == "right" else "right"], 2] += 0.01
+    j[25:, :, 2] += 0.3
+    return j
+
+
+def test_fill_support_plants_the_lower_foot_where_none_is_planted():
+    from retarget.contacts import fill_support
+
+    j = _sliding_feet_clip()
+    base = ContactConfig(floor_height=0.0)
+    raw = detect_contacts(j, 20.0, base)
+    assert raw[:9, 0].all() and not raw[10:].any()  # sliding and flying frames have no contact
+    off = fill_support(raw, j, replace(base, support="off"))
+    np.testing.assert_array_equal(off, raw)
+    near = fill_support(raw, j, replace(base, support="near"))
+    assert near[:10, 0].all() and not near[:10, 1].any()  # frame 9 extends the left foot's phase
+    assert near[10:20, 1].all() and not near[10:20, 0].any()  # the lower (right) foot carries 10-19
+    assert near[20:25, 0].all() and not near[20:25, 1].any()  # then the left
+    assert not near[25:].any()  # a flight stays a flight
+    always = fill_support(raw, j, replace(base, support="always"))
+    assert always[25:].any(axis=1).all() and (always[25:].sum(axis=1) == 1).all()
+    assert (always[:25] == near[:25]).all()
+    with pytest.raises(InputError, match="contact support must be one of"):
+        fill_support(raw, j, replace(base, support="sometimes"))
+
+
+def test_fill_support_does_not_flicker_between_feet():
+    """A foot that is lower for fewer than ``min_contact_frames`` frames does not get its own phase."""
+    from retarget.contacts import fill_support
+
+    j = _sliding_feet_clip()
+    lf = [JOINT_INDEX["left_ankle"], JOINT_INDEX["left_foot"]]
+    j[14, lf, 2] -= 0.02  # left briefly lower than right at frame 14
+    cfg = ContactConfig(floor_height=0.0, min_contact_frames=3)
+    filled = fill_support(detect_contacts(j, 20.0, cfg), j, cfg)
+    assert filled[10:20, 1].all() and not filled[10:20, 0].any()
+
+
+def test_retargeting_plants_a_foot_where_the_human_slides(robot):
+    """With ``support="near"`` (the default) the robot keeps a sole on the floor in the frames where
+    both human feet slide; with ``"off"`` it lifts both (the validator's ``floating`` failure)."""
+    from retarget.metrics import sole_points
+
+    j = _sliding_feet_clip()[:25]  # no flight
+    lowest = {}
+    for mode in ("off", "near"):
+        cfg = replace(SMALL, contacts=ContactConfig(floor_height=0.0, support=mode), collision=CollisionConfig(enabled=False))
+        rt = Retargeter(robot, cfg)
+        res = rt.run(j, 20.0, progress=False)
+        assert res.success, res.solver_status()
+        assert res.contacts[12:22].any(axis=1).all() == (mode == "near")
+        _, corners = sole_points(rt.kin, res.x)
+        lowest[mode] = corners[..., 2].min(axis=(1, 2))
+    assert lowest["off"][12:22].min() > 0.005  # both soles up: floating
+    assert np.abs(lowest["near"][12:22]).max() < 1e-3  # a sole on the floor
+
+
 def test_scaled_contact_config_scales_only_the_body_size_thresholds():
     from dataclasses import fields
 

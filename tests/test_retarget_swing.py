@@ -39,7 +39,11 @@ def test_clearance_profile_clip_edges():
     c[6:, 0] = True  # left starts in swing: no lift-off ramp at the clip start
     h = swing_clearance(c, 20.0, SwingConfig(height=0.1, lift=0.05, ramp_seconds=0.1))
     assert h[0, 0] == pytest.approx(0.1) and h[5, 0] == pytest.approx(0.05)
-    assert not h[:, 1].any()  # right never touches the ground in the clip: no clearance imposed
+    # right never touches the ground while left does (a one-legged stance): held up throughout,
+    # so it cannot drag along the floor
+    np.testing.assert_allclose(h[:, 1], 0.1)
+    # neither foot ever touches: nothing to clear
+    assert not swing_clearance(np.zeros((10, 2), dtype=bool), 20.0, SwingConfig(height=0.1)).any()
 
 
 def skimming_walk(T: int = 50) -> np.ndarray:
