@@ -56,6 +56,9 @@ def add_balance_arguments(parser) -> None:
                         help="frames where no human foot is planted: 'always' plants the lower robot foot (no flight "
                              "phase), 'near' only where a foot is near the floor, 'off' leaves both feet up "
                              f"(default {d.contacts.support})")
+    parser.add_argument("--double-support", type=int, default=d.contacts.min_double_support, metavar="FRAMES",
+                        help="at each step keep the old foot planted until this many frames after the new one touches "
+                             f"down (default {d.contacts.min_double_support} = as in the motion)")
     parser.add_argument("--no-self-collision", action="store_true",
                         help="do not keep the robot's bodies apart (faster; the validator's self_collision check may then fail)")
 
@@ -72,8 +75,10 @@ def balance_config(args: argparse.Namespace, config=None):
         value = getattr(args, name)
         if not value >= 0:  # also rejects NaN
             raise InputError(f"--{name.replace('_', '-')} must be >= 0, got {value}")
+    if args.double_support < 0:
+        raise InputError(f"--double-support must be >= 0 frames, got {args.double_support}")
     return replace(config, weights=replace(config.weights, com=float(args.com_weight), zmp=float(args.zmp_weight)),
-                   contacts=replace(config.contacts, support=args.support),
+                   contacts=replace(config.contacts, support=args.support, min_double_support=int(args.double_support)),
                    collision=replace(config.collision, enabled=not args.no_self_collision))
 
 

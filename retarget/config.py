@@ -40,6 +40,9 @@ class ContactConfig:
     floor_percentile: float = 2.0
     floor_height: float | None = None  # metres; None = estimate (floor_percentile) from the clip
     support: str = "near"  # "off" | "near" | "always": plant a foot in frames where none is planted
+    #: at a hand-over from one foot to the other, keep the old foot planted until at least this many
+    #: frames after the new one touches down (0 = as detected); see contacts.ensure_double_support
+    min_double_support: int = 0
 
 
 @dataclass(frozen=True)

@@ -93,6 +93,32 @@ def fill_support(contacts: np.ndarray, joints: np.ndarray, config: ContactConfig
     return out
 
 
+def ensure_double_support(contacts: np.ndarray, frames: int, min_swing: int = 1) -> np.ndarray:
+    """``contacts[T, 2]`` where, at every touch-down of one foot while the other is planted, the
+    other foot stays planted for at least ``frames`` frames from the touch-down (its lift-off is
+    delayed, keeping ``min_swing`` swing frames before its next contact), so the weight moves
+    from foot to foot during a double-support phase.  ``frames`` <= 0 returns the mask unchanged."""
+    out = np.array(contacts, dtype=bool, copy=True)
+    T = len(out)
+    if frames <= 0 or T == 0:
+        return out
+    for side in range(2):
+        other = 1 - side
+        for a, _ in contact_phases(contacts[:, side]):
+            if a == 0 or not contacts[a - 1, other]:
+                continue  # not a hand-over from the other foot
+            end = a - 1
+            while end < T and contacts[end, other]:
+                end += 1  # the other foot's phase ends (exclusive) at ``end``
+            nxt = end
+            while nxt < T and not contacts[nxt, other]:
+                nxt += 1
+            stop = min(a + frames, T, nxt - max(1, min_swing) if nxt < T else T)
+            if stop > end:
+                out[end:stop, other] = True
+    return out
+
+
 def _merge_short(choice: np.ndarray, min_len: int) -> None:
     """In place: runs of equal values in ``choice`` shorter than ``min_len`` take the value of the
     longer neighbouring run (the only run stays as it is)."""

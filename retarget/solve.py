@@ -22,7 +22,7 @@ import numpy as np
 from motok_robot.errors import InputError
 from motok_robot.motion.skeleton import JOINT_NAMES, leg_length, rest_pose
 from retarget.config import ContactConfig, RetargetConfig
-from retarget.contacts import detect_contacts, fill_support
+from retarget.contacts import detect_contacts, ensure_double_support, fill_support
 from retarget.problem import RobotKinematics, WindowProblem
 from retarget.robot_model import RetargetRobot
 from retarget.swing import swing_clearance, transition_frames
@@ -226,6 +226,7 @@ class Retargeter:
         T = len(joints)
         contact_cfg = scaled_contact_config(joints, cfg.contacts)
         contacts = fill_support(detect_contacts(joints, fps, contact_cfg), joints, contact_cfg)
+        contacts = ensure_double_support(contacts, contact_cfg.min_double_support, contact_cfg.min_swing_frames)
         targets = make_targets(joints, self.kin.nominal_sites, self.robot.limb_scale, contacts, scale=cfg.scale, mode=cfg.scaling)
         K = len(self.robot.keypoints)
         kp_idx = [JOINT_NAMES.index(k.human_joint) for k in self.robot.keypoints]

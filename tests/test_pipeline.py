@@ -240,6 +240,7 @@ def test_cli_invalid_input_is_one_line_before_any_work(runs, tmp_path, capsys):
         (["run", "a person walks", "--sim-video", "--out", str(out)], "--sim-video needs --sim"),
         (["run", "a person walks", "--zmp-weight", "-1", "--out", str(out)], "--zmp-weight must be >= 0"),
         (["run", "a person walks", "--com-weight", "nan", "--out", str(out)], "--com-weight must be >= 0"),
+        (["run", "a person walks", "--double-support", "-2", "--out", str(out)], "--double-support must be >= 0"),
     ]
     for argv, message in cases:
         assert main(argv + _model_args(runs)) == 2, argv
@@ -502,10 +503,10 @@ def test_cli_retargeting_options_reach_the_retargeter(tmp_path, monkeypatch):
     monkeypatch.setattr(pipeline.Pipeline, "__init__", capture)
     with pytest.raises(Stop):
         main(["run", "--motion", "m.npz", "--zmp-weight", "1000", "--com-weight", "30", "--support", "always",
-              "--no-self-collision", "--out", str(tmp_path / "o")])
+              "--double-support", "3", "--no-self-collision", "--out", str(tmp_path / "o")])
     retarget = seen["config"].retarget
     assert retarget.weights.zmp == 1000.0 and retarget.weights.com == 30.0 and not retarget.collision.enabled
-    assert retarget.contacts.support == "always"
+    assert retarget.contacts.support == "always" and retarget.contacts.min_double_support == 3
     with pytest.raises(Stop):
         main(["run", "--motion", "m.npz", "--out", str(tmp_path / "o")])
     from retarget.config import RetargetConfig

@@ -305,6 +305,25 @@ def test_fill_support_does_not_flicker_between_feet():
     assert filled[10:20, 1].all() and not filled[10:20, 0].any()
 
 
+def test_double_support_delays_the_lift_off_of_the_old_foot():
+    from retarget.contacts import ensure_double_support
+
+    def mask(left: str, right: str) -> np.ndarray:
+        return np.array([[a == "x", b == "x"] for a, b in zip(left, right)])
+
+    #                left           right
+    c = mask("xxxxx.......xxxx", "....xxxxxx......")
+    out = ensure_double_support(c, 3, min_swing=2)
+    # right touches down at 4 while left is planted: left stays until frame 6 (4 + 3 - 1)
+    assert out[:, 0].tolist() == mask("xxxxxxx.....xxxx", "x" * 16)[:, 0].tolist()
+    # left touches down at 12 but right lifted at 10 (no hand-over): right unchanged
+    np.testing.assert_array_equal(out[:, 1], c[:, 1])
+    # a short swing keeps min_swing frames: left's next contact at 8 allows planting up to 5 only
+    c2 = mask("xxxxx...xxxx", "....xxxxxxxx")
+    assert ensure_double_support(c2, 5, min_swing=2)[:, 0].tolist() == mask("xxxxxx..xxxx", "x" * 12)[:, 0].tolist()
+    np.testing.assert_array_equal(ensure_double_support(c, 0), c)
+
+
 def test_retargeting_plants_a_foot_where_the_human_slides(robot):
     """With ``support="near"`` (the default) the robot keeps a sole on the floor in the frames where
     both human feet slide; with ``"off"`` it lifts both (the validator's ``floating`` failure)."""
