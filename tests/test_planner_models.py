@@ -109,9 +109,10 @@ def test_guided_logits_formula():
     assert torch.allclose(guided_logits(c, u, 3.0), u + 3.0 * (c - u), atol=1e-6)
 
 
-def test_autoregressive_logits_are_causal():
+@pytest.mark.parametrize("every", [False, True])
+def test_autoregressive_logits_are_causal(every):
     torch.manual_seed(1)
-    model = ARPlanner(tiny("ar")).eval()
+    model = ARPlanner(tiny("ar", global_every_position=every)).eval()
     with torch.no_grad():  # make the (zero-initialised) local path active
         for p in model.local_encoder.out.parameters():
             p.normal_()
@@ -126,6 +127,30 @@ def test_autoregressive_logits_are_causal():
         # output j predicts token j (0-based) from tokens < j: outputs 0..i+1 only see tokens 0..i
         assert torch.allclose(la[:, : i + 2], lb[:, : i + 2], atol=1e-5), i
         assert not torch.allclose(la[:, i + 2:], lb[:, i + 2:], atol=1e-5)
+
+
+@pytest.mark.parametrize("every", [False, True])
+@pytest.mark.parametrize("cfg_scale", [1.0, 2.5])
+def test_ar_cached_sampling_matches_full_logits(every, cfg_scale):
+    """Greedy sampling with the key/value cache picks, at every position, the argmax of the full
+    (uncached) forward pass on the tokens it drew: both paths condition each token the same way."""
+    from motok_robot.planner.sampling import guided_logits as combine
+
+    torch.manual_seed(3)
+    model = ARPlanner(tiny("ar", global_every_position=every)).eval()
+    cond = Conditions(text_embedding=torch.randn(2, D))
+    tokens = model.plan(cond, n_tokens=10, seed=0, cfg_scale=cfg_scale, temperature=0.0)
+    with torch.no_grad():
+        logits = model.logits(tokens, cond)[:, :10]
+        if cfg_scale != 1.0:
+            logits = combine(logits, model.logits(tokens, cond.without_global())[:, :10], cfg_scale)
+    logits[..., model.end_id] = float("-inf")
+    assert torch.equal(logits.argmax(-1), tokens)
+
+
+def test_global_every_position_is_for_the_ar_planner():
+    with pytest.raises(InputError, match="global_every_position is for the AR planner"):
+        tiny("masked", global_every_position=True).validate()
 
 
 def test_ar_local_features_sit_at_the_preceding_position():

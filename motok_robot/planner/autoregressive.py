@@ -45,7 +45,10 @@ class ARPlanner(Planner):
         predicts token ``i + 1`` (1-based) or [END]. ``n_local``: tokens the local conditions cover."""
         b, length = tokens.shape
         g = self.global_encoder(cond, drop)
-        seq = torch.cat([g[:, None], self.token_embedding(tokens)], dim=1)
+        embedded = self.token_embedding(tokens)
+        if self.config.global_every_position:
+            embedded = embedded + g[:, None]
+        seq = torch.cat([g[:, None], embedded], dim=1)
         if cond.local is not None:
             if n_local is None:
                 n_local = -(-cond.local.frames // self.config.downsample)
@@ -137,6 +140,8 @@ class ARPlanner(Planner):
             out[:, i] = token
             inputs = token.masked_fill(token == self.end_id, self.pad_id)
             x = self.token_embedding(torch.cat([inputs, inputs]) if guide else inputs)[:, None]
+            if self.config.global_every_position:
+                x = x + g[:, None]
         width = int(n.max())
         out = out[:, :width]
         valid = torch.arange(width, device=device)[None] < n[:, None]

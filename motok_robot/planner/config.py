@@ -51,6 +51,10 @@ class PlannerConfig:
     #: one token at a time).  Without it the masked planner trained on the shared data ignored
     #: the tokens around a gap in locomotion (docs/planner.md, "What the planners learned").
     token_conv_kernel: int | None = None
+    #: AR planner: also add the global condition feature ``M_g`` to every token embedding, not only
+    #: at the first position, so that late tokens do not have to find the caption through
+    #: attention alone.  False = ``M_g`` at the first position only (the runs shipped so far).
+    global_every_position: bool = False
 
     @property
     def max_tokens(self) -> int:
@@ -80,6 +84,9 @@ class PlannerConfig:
         if self.token_conv_kernel and self.kind != "masked":
             raise InputError("planner config: token_conv_kernel is for the masked planner only (the AR planner "
                              "decodes one token at a time)")
+        if self.global_every_position and self.kind != "ar":
+            raise InputError("planner config: global_every_position is for the AR planner (the masked planner's "
+                             "positions all attend to M_g)")
         if len(set(self.action_labels)) != len(self.action_labels):
             raise InputError("planner config: action_labels contains duplicates")
         return self
