@@ -69,8 +69,7 @@ def fill_support(contacts: np.ndarray, joints: np.ndarray, config: ContactConfig
     floor; ``"always"``: all) get the lower foot (:func:`foot_height_ratio`) planted.  Choices
     shorter than ``min_contact_frames`` take their neighbour's foot (the phase planted right
     before or after the run counts as a neighbour), so the filled frames extend or start phases
-    instead of flickering between feet.  ``"off"`` returns the
-    mask unchanged.
+    instead of flickering between feet.  ``"off"`` returns the mask unchanged.
     """
     if config.support not in SUPPORT_MODES:
         raise InputError(f"contact support must be one of {SUPPORT_MODES} (got {config.support!r})")
