@@ -131,7 +131,10 @@ def test_run_writes_every_file_and_they_parse(full_run):
         assert z["joints"].shape == (T, NUM_JOINTS, 3) and np.isfinite(z["joints"]).all()
         assert str(z["text"]) == "a person walks forward" and int(z["seed"]) == 3
     robot_npz = read_robot_npz(out / "robot.npz")
-    assert robot_npz.robot == "op3_like" and robot_npz.qpos.shape[0] == T and np.isfinite(robot_npz.qpos).all()
+    # the robot plays the motion retime_factor times slower when the servos need it (retarget.retime)
+    assert robot_npz.retime_factor == pytest.approx(result.retime_factor)
+    frames = int(round((T - 1) * robot_npz.retime_factor)) + 1
+    assert robot_npz.robot == "op3_like" and robot_npz.qpos.shape[0] == frames and np.isfinite(robot_npz.qpos).all()
     report = json.loads((out / "report.json").read_text())
     validate_report_dict(report)
     assert report["passed"] == result.passed and report["failed_checks"] == result.failed_checks
