@@ -155,6 +155,21 @@ class PlannerTrainConfig:
     device: str = "cpu"
     control: ControlConfig = field(default_factory=ControlConfig)
 
+    def validate(self, kind: str) -> "PlannerTrainConfig":
+        """Checks of the options that only one planner kind (``"masked"`` / ``"ar"``) uses."""
+        if not 0.0 <= self.input_corruption < 1.0:
+            raise InputError(f"train config: input_corruption must be in [0, 1) (got {self.input_corruption})")
+        if kind == "masked" and self.input_corruption > 0:
+            raise InputError("train config: input_corruption is for the AR planner (the masked planner already "
+                             "trains on masked inputs)")
+        if self.masked_loss_average not in ("token", "sample"):
+            raise InputError(f"train config: masked_loss_average must be 'token' or 'sample' (got {self.masked_loss_average!r})")
+        if kind == "ar" and self.masked_loss_average != "token":
+            raise InputError("train config: masked_loss_average is for the masked planner")
+        if not 0.0 <= self.balance_groups <= 1.0:
+            raise InputError(f"train config: balance_groups must be in [0, 1] (got {self.balance_groups})")
+        return self
+
 
 @dataclass
 class SampleConfig:

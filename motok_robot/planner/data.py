@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import json
 import re
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -180,9 +181,7 @@ class PlannerData:
         if balance == 0:
             return None
         groups = [self.group_of(i) for i in range(len(self.clips))]
-        counts: dict[tuple, int] = {}
-        for g in groups:
-            counts[g] = counts.get(g, 0) + 1
+        counts = Counter(groups)
         weights = np.array([counts[g] ** -float(balance) for g in groups], dtype=np.float64)
         return weights / weights.sum()
 

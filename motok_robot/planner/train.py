@@ -119,16 +119,7 @@ def train_planner(
             config.text_encoder = text_encoder
     if device is not None:
         train_cfg.device = device
-    if not 0.0 <= train_cfg.input_corruption < 1.0:
-        raise InputError(f"train config: input_corruption must be in [0, 1) (got {train_cfg.input_corruption})")
-    if kind == "masked" and train_cfg.input_corruption > 0:
-        raise InputError("train config: input_corruption is for the AR planner (the masked planner already trains on masked inputs)")
-    if train_cfg.masked_loss_average not in ("token", "sample"):
-        raise InputError(f"train config: masked_loss_average must be 'token' or 'sample' (got {train_cfg.masked_loss_average!r})")
-    if kind == "ar" and train_cfg.masked_loss_average != "token":
-        raise InputError("train config: masked_loss_average is for the masked planner")
-    if not 0.0 <= train_cfg.balance_groups <= 1.0:
-        raise InputError(f"train config: balance_groups must be in [0, 1] (got {train_cfg.balance_groups})")
+    train_cfg.validate(kind)
     dev = torch.device(train_cfg.device)
     torch.manual_seed(train_cfg.seed)
 
