@@ -32,11 +32,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import print_table, write_json  # noqa: E402
 
 
-def clip_groups(data_dir: Path, split: str, per_content: int, seed: int = 0) -> dict[str, list[str]]:
-    """Clip ids of ``split`` with a caption, up to ``per_content`` per action label (or source)."""
-    from motok_robot.planner.data import clip_action, open_dataset
+def clip_groups(dataset, per_content: int, seed: int = 0) -> dict[str, list[str]]:
+    """Clip ids of a prepared ``dataset`` (one split) with a caption, up to ``per_content`` per
+    action label (or source)."""
+    from motok_robot.planner.data import clip_action
 
-    dataset = open_dataset(data_dir, split)
     groups: dict[str, list[str]] = defaultdict(list)
     for clip_id in dataset.clip_ids:
         record = dataset.record(clip_id)
@@ -103,7 +103,7 @@ def main() -> None:
     masked, ar = masked_gen.planner.eval(), ar_gen.planner.eval()
     dataset = open_dataset(args.data, args.split)
     rows = []
-    for group, ids in clip_groups(args.data, args.split, args.per_content).items():
+    for group, ids in clip_groups(dataset, args.per_content).items():
         acc = context_accuracy(masked, ar, masked_gen.tokenizer, masked_gen.text_encoder, dataset, ids)
         if acc["tokens"]:
             rows.append({"label": group, "clips": len(ids), **acc})
