@@ -134,8 +134,6 @@ def test_autoregressive_logits_are_causal(every):
 def test_ar_cached_sampling_matches_full_logits(every, cfg_scale):
     """Greedy sampling with the key/value cache picks, at every position, the argmax of the full
     (uncached) forward pass on the tokens it drew: both paths condition each token the same way."""
-    from motok_robot.planner.sampling import guided_logits as combine
-
     torch.manual_seed(3)
     model = ARPlanner(tiny("ar", global_every_position=every)).eval()
     cond = Conditions(text_embedding=torch.randn(2, D))
@@ -143,7 +141,7 @@ def test_ar_cached_sampling_matches_full_logits(every, cfg_scale):
     with torch.no_grad():
         logits = model.logits(tokens, cond)[:, :10]
         if cfg_scale != 1.0:
-            logits = combine(logits, model.logits(tokens, cond.without_global())[:, :10], cfg_scale)
+            logits = guided_logits(logits, model.logits(tokens, cond.without_global())[:, :10], cfg_scale)
     logits[..., model.end_id] = float("-inf")
     assert torch.equal(logits.argmax(-1), tokens)
 
