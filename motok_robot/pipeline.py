@@ -29,6 +29,12 @@ to real servos on ``port`` in real time and only when the validation report pass
 ``force=True``).  A failed validation is not an error: every file is still written, the
 verdict says FAIL, and hardware playback is refused.
 
+Two repairs follow a failed validation, each kept only when it trades no passing check for a
+failing one (thresholds are never changed): when the robot loses balance, the motion is
+retargeted again with the ZMP term (``PipelineConfig.balance_zmp_weight``; stage ``balance``),
+and when it asks more than the servos have, the robot plays it slower
+(``PipelineConfig.max_retime``; stage ``retime``).  ``summary.md`` notes what was done.
+
 Output is atomic: the stages write into a hidden folder ``.OUT.partial-*`` next to ``out_dir``,
 renamed to ``out_dir`` only when every stage finished.  If a stage raises (or Ctrl-C), the
 partial folder is renamed ``OUT.failed/`` with ``FAILED.txt`` naming the stage and the error,
@@ -65,9 +71,12 @@ PLAYBACK_MODES = ("dry-run", "sim", "port")
 #: Clip length used with constraints when no ``seconds`` is given (the planner's no-text default).
 DEFAULT_CONSTRAINED_SECONDS = 6.0
 #: Stages timed in :attr:`PipelineResult.timings`, in order.
-STAGES = ("generate", "retarget", "validate", "retime", "plots", "render", "playback")
+STAGES = ("generate", "retarget", "validate", "balance", "retime", "plots", "render", "playback")
 #: validation checks that a slower playback of the same motion can fix
 SPEED_CHECKS = frozenset({"torque", "joint_velocity", "joint_acceleration"})
+#: validation checks of the robot's balance, which retargeting with the ZMP term can fix
+#: (``PipelineConfig.balance_zmp_weight``)
+BALANCE_CHECKS = frozenset({"zmp", "static_balance", "center_of_pressure", "fall", "base_drift"})
 #: slow-down factors the pipeline tries, in order, up to ``PipelineConfig.max_retime``
 RETIME_STEPS = (1.25, 1.5, 2.0, 3.0)
 PLOT_FILES = ("balance_topview.png", "feet.png", "joints.png", "torques.png")
@@ -152,6 +161,13 @@ class PipelineConfig:
             :data:`RETIME_STEPS`) and keep the first timing whose speed checks all pass and that
             fails no check the original timing passed; the original timing is kept when none
             does.  Thresholds are never changed.  1.0 = never slow down.
+        balance_zmp_weight: when a balance check fails (:data:`BALANCE_CHECKS`: ZMP or CoM
+            outside the support, a fall, base drift) and retargeting ran without the ZMP term
+            (``retarget.weights.zmp == 0``), retarget the motion again with this ZMP weight and
+            keep the new trajectory when the checks it fails, speed checks aside (retiming comes
+            next), are a strict subset of those the first one failed; otherwise the first is
+            kept.  Clips that pass (most gestures) never pay for the slower ZMP solve.  0 =
+            never re-solve.
     """
 
     planner: str = "masked"
@@ -166,6 +182,7 @@ class PipelineConfig:
     realtime: bool = False
     sim_video: bool = False
     max_retime: float = 2.0
+    balance_zmp_weight: float = 1000.0
 
 
 @dataclass
@@ -212,6 +229,8 @@ class PipelineResult:
         notes: warnings worth reading (failed solver windows, forced playback ...).
         retime_factor: how many times slower than the human motion the robot plays it (1.0:
             not slowed down; see ``PipelineConfig.max_retime``).
+        zmp_weight: the ZMP weight of the retargeting that made the kept trajectory (0: without
+            the ZMP term; see ``PipelineConfig.balance_zmp_weight``).
     """
 
     out_dir: Path
@@ -228,6 +247,7 @@ class PipelineResult:
     model: str = ""
     notes: list[str] = field(default_factory=list)
     retime_factor: float = 1.0
+    zmp_weight: float = 0.0
 
     @property
     def ok(self) -> bool:
@@ -246,7 +266,7 @@ class PipelineResult:
             "files": {k: _rel(v, self.out_dir) for k, v in self.files.items()},
             "timings_s": {k: round(v, 4) for k, v in self.timings.items()},
             "playback": asdict(self.playback), "model": self.model, "notes": list(self.notes),
-            "retime_factor": self.retime_factor,
+            "retime_factor": self.retime_factor, "zmp_weight": self.zmp_weight,
         }
 
 
@@ -456,6 +476,8 @@ class Pipeline:
             setattr(config, key, value)
         if config.planner not in ("masked", "ar"):
             raise InputError(f"planner must be 'masked' or 'ar', got {config.planner!r}")
+        if not config.balance_zmp_weight >= 0:  # also rejects NaN
+            raise InputError(f"balance_zmp_weight (--balance-zmp-weight) must be >= 0, got {config.balance_zmp_weight}")
         self.config = config
         self._generator = None
         self._robots: dict[str, dict] = {}
@@ -626,14 +648,7 @@ class Pipeline:
         rt = entry["retargeter"].run(motion.joints, float(motion.fps), progress=False, source="motion.npz")
         files["robot"] = write_robot_npz(tmp / "robot.npz", rt)
         timings["retarget"] = time.perf_counter() - t
-        if rt.collision_pairs:
-            notes.append(f"retargeting: kept {len(rt.collision_pairs)} body part pairs apart that the human motion "
-                         f"drove into each other ({', '.join(rt.collision_pairs)})")
-        failed_windows = rt.failed_windows()
-        if failed_windows:
-            notes.append(f"retargeting: {len(failed_windows)}/{len(rt.windows)} solver windows did not converge "
-                         f"(first: frames {failed_windows[0].start}-{failed_windows[0].stop}, "
-                         f"{failed_windows[0].status})")
+        zmp_weight = float(entry["retargeter"].config.weights.zmp)
         bar.update()
 
         # 3. validation -> report.json, plots, video.mp4
@@ -653,6 +668,17 @@ class Pipeline:
 
         trajectory, validation = validate_robot_file()
         timings["validate"] = time.perf_counter() - t
+        unbalanced = BALANCE_CHECKS.intersection(validation.report["failed_checks"])
+        if unbalanced and cfg.balance_zmp_weight > 0 and zmp_weight == 0:
+            stage("balance")
+            t = time.perf_counter()
+            rebalanced = self._rebalance(entry, motion, files["robot"], unbalanced, validation, validate_robot_file,
+                                         notes)
+            if rebalanced is not None:
+                rt, trajectory, validation = rebalanced
+                zmp_weight = cfg.balance_zmp_weight
+            timings["balance"] = time.perf_counter() - t
+        notes[:0] = _retargeting_notes(rt)
         retime_factor = 1.0
         too_fast = SPEED_CHECKS.intersection(validation.report["failed_checks"])
         if too_fast and cfg.max_retime > 1.0:
@@ -697,7 +723,47 @@ class Pipeline:
             out_dir=tmp, text=req["text"] or motion.text, robot=entry["robot"].name, seconds=float(motion.seconds),
             seed=req["seed"], files=files, passed=bool(report["passed"]),
             failed_checks=list(report["failed_checks"]), timings=timings, playback=pb, report=report,
-            model=motion.model, notes=notes, retime_factor=retime_factor)
+            model=motion.model, notes=notes, retime_factor=retime_factor, zmp_weight=zmp_weight)
+
+    def _balance_retargeter(self, entry: dict):
+        """The robot's retargeter with the ZMP term at ``balance_zmp_weight`` (built once per robot
+        and weight; its compiled window problems are kept like the plain retargeter's)."""
+        from dataclasses import replace
+
+        from retarget.solve import Retargeter
+
+        weight = float(self.config.balance_zmp_weight)
+        cache = entry.setdefault("balance_retargeters", {})
+        if weight not in cache:
+            base = entry["retargeter"]
+            cache[weight] = Retargeter(base.robot, replace(base.config, weights=replace(base.config.weights, zmp=weight)))
+        return cache[weight]
+
+    def _rebalance(self, entry: dict, motion, robot_path: Path, unbalanced: set, validation, validate_robot_file,
+                   notes: list[str]):
+        """Retarget ``motion`` again with the ZMP term (``balance_zmp_weight``) and validate it.
+        Keeps the new trajectory in ``robot_path`` and returns ``(retarget result, trajectory,
+        validation)`` when the checks it fails, speed checks aside, are a strict subset of those
+        that failed before; otherwise restores the first trajectory and returns None."""
+        from retarget.io import write_robot_npz
+
+        weight = self.config.balance_zmp_weight
+        original_bytes = robot_path.read_bytes()
+        before = set(validation.report["failed_checks"])
+        rt = self._balance_retargeter(entry).run(motion.joints, float(motion.fps), progress=False, source="motion.npz")
+        write_robot_npz(robot_path, rt)
+        trajectory, balanced = validate_robot_file()
+        after = set(balanced.report["failed_checks"])
+        listed = ", ".join(sorted(unbalanced))
+        if after - SPEED_CHECKS < before - SPEED_CHECKS:
+            now = "every check passes" if not after else f"fails {', '.join(sorted(after))}"
+            notes.append(f"balance: {listed} failed; retargeted again with the ZMP term (weight {weight:g}), the "
+                         f"trajectory kept: {now}")
+            return rt, trajectory, balanced
+        robot_path.write_bytes(original_bytes)
+        notes.append(f"balance: {listed} failed; retargeting again with the ZMP term (weight {weight:g}) failed "
+                     f"{', '.join(sorted(after)) or 'nothing'} instead, not fewer checks, so the first trajectory is kept")
+        return None
 
     def _slow_down(self, robot_path: Path, too_fast: set, validation, trajectory, validate_robot_file, notes):
         """Play ``robot_path`` slower (:data:`RETIME_STEPS` up to ``max_retime``) until no speed
@@ -946,6 +1012,20 @@ class Pipeline:
         os.replace(part, path)
 
 
+def _retargeting_notes(rt) -> list[str]:
+    """Notes worth reading about a retargeting result: body parts kept apart, failed windows."""
+    notes = []
+    if rt.collision_pairs:
+        notes.append(f"retargeting: kept {len(rt.collision_pairs)} body part pairs apart that the human motion "
+                     f"drove into each other ({', '.join(rt.collision_pairs)})")
+    failed_windows = rt.failed_windows()
+    if failed_windows:
+        notes.append(f"retargeting: {len(failed_windows)}/{len(rt.windows)} solver windows did not converge "
+                     f"(first: frames {failed_windows[0].start}-{failed_windows[0].stop}, "
+                     f"{failed_windows[0].status})")
+    return notes
+
+
 # ----------------------------------------------------------------------------- summary.md
 _FILE_LABELS = {
     "motion": "human motion (joints, features, tokens)",
@@ -966,7 +1046,8 @@ def summary_markdown(result: PipelineResult) -> str:
     verdict = "PASS" if result.passed else "FAIL"
     lines = [f"# {verdict}: \"{result.text}\"", "",
              f"* robot: `{result.robot}`; clip: {result.seconds:.2f} s; seed: {result.seed}"
-             + (f"; the robot plays it {result.retime_factor:g}x slower (servo limits)" if result.retime_factor != 1.0 else ""),
+             + (f"; the robot plays it {result.retime_factor:g}x slower (servo limits)" if result.retime_factor != 1.0 else "")
+             + (f"; retargeted with the ZMP term (weight {result.zmp_weight:g})" if result.zmp_weight > 0 else ""),
              f"* models: `{result.model}`" if result.model else "* models: -",
              f"* validation: **{verdict}**"
              + (f" - failing checks: {', '.join(f'`{c}`' for c in result.failed_checks)}" if result.failed_checks else

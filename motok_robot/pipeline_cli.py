@@ -60,6 +60,10 @@ def register(commands, groups) -> None:
                         help="when the motion is too fast for the servos (the torque, joint_velocity or "
                         "joint_acceleration check fails), play it up to S times slower until those checks pass "
                         "(default %(default)g; 1 = never)")
+    parser.add_argument("--balance-zmp-weight", type=float, default=PipelineConfig.balance_zmp_weight, metavar="W",
+                        help="when the robot loses balance (the zmp, static_balance, center_of_pressure, fall or "
+                        "base_drift check fails) after retargeting without the ZMP term, retarget again with this ZMP "
+                        "weight and keep that trajectory if it fails fewer checks (default %(default)g; 0 = never)")
     add_balance_arguments(parser.add_argument_group("retargeting"))
     models = parser.add_argument_group("models")
     models.add_argument("--planner", choices=("masked", "ar"), default="masked", help="planner (default masked)")
@@ -124,7 +128,7 @@ def run_command(args: argparse.Namespace) -> int:
     pipe = Pipeline(PipelineConfig(planner=args.planner, tokenizer_run=args.tokenizer, planner_run=args.planner_run,
                                    device=args.device, generation=generation, plots=not args.no_plots,
                                    realtime=args.realtime, sim_video=args.sim_video, max_retime=args.max_retime,
-                                   retarget=retarget_config))
+                                   balance_zmp_weight=args.balance_zmp_weight, retarget=retarget_config))
     if args.prompts is not None:
         return _run_batch(pipe, prompts, args, robot, playback)
 
@@ -155,9 +159,10 @@ def _has_control(args: argparse.Namespace) -> bool:
 
 def format_result(result) -> str:
     """The short summary printed by ``run``: verdict, failing checks, per-stage times, files."""
+    from motok_robot.pipeline import STAGES
+
     t = result.timings
-    stages = " | ".join(f"{k} {t[k]:.2f} s" for k in ("load", "setup", "generate", "retarget", "validate", "retime",
-                                                        "plots", "render", "playback") if k in t)
+    stages = " | ".join(f"{k} {t[k]:.2f} s" for k in ("load", "setup", *STAGES) if k in t)
     pb = result.playback
     lines = [result.line(),
              "  failed checks: " + (", ".join(result.failed_checks) if result.failed_checks else "none"),
