@@ -74,9 +74,9 @@ DEFAULT_CONSTRAINED_SECONDS = 6.0
 STAGES = ("generate", "retarget", "validate", "balance", "retime", "plots", "render", "playback")
 #: validation checks that a slower playback of the same motion can fix
 SPEED_CHECKS = frozenset({"torque", "joint_velocity", "joint_acceleration"})
-#: validation checks of the robot's balance, which retargeting with the ZMP term can fix
-#: (``PipelineConfig.balance_zmp_weight``)
-BALANCE_CHECKS = frozenset({"zmp", "static_balance", "center_of_pressure", "fall", "base_drift"})
+#: validation checks of the robot's footing and balance, which retargeting with the ZMP term and a
+#: foot planted in every frame can fix (``PipelineConfig.balance_zmp_weight``)
+BALANCE_CHECKS = frozenset({"floating", "zmp", "static_balance", "center_of_pressure", "fall", "base_drift"})
 #: slow-down factors the pipeline tries, in order, up to ``PipelineConfig.max_retime``
 RETIME_STEPS = (1.25, 1.5, 2.0, 3.0)
 PLOT_FILES = ("balance_topview.png", "feet.png", "joints.png", "torques.png")
@@ -161,12 +161,14 @@ class PipelineConfig:
             :data:`RETIME_STEPS`) and keep the first timing whose speed checks all pass and that
             fails no check the original timing passed; the original timing is kept when none
             does.  Thresholds are never changed.  1.0 = never slow down.
-        balance_zmp_weight: when a balance check fails (:data:`BALANCE_CHECKS`: ZMP or CoM
-            outside the support, a fall, base drift) and retargeting ran without the ZMP term
-            (``retarget.weights.zmp == 0``), retarget the motion again with this ZMP weight and
-            keep the new trajectory when the checks it fails, speed checks aside (retiming comes
-            next), are a strict subset of those the first one failed; otherwise the first is
-            kept.  Clips that pass (most gestures) never pay for the slower ZMP solve.  0 =
+        balance_zmp_weight: when a footing or balance check fails (:data:`BALANCE_CHECKS`:
+            both feet in the air, ZMP or CoM outside the support, a fall, base drift) and
+            retargeting ran without the ZMP term (``retarget.weights.zmp == 0``), retarget the
+            motion again with this ZMP weight and a robot foot planted in every frame where no
+            human foot is (contact support ``"always"``: a servo humanoid has no flight phase),
+            and keep the new trajectory when the checks it fails, speed checks aside (retiming
+            comes next), are a strict subset of those the first one failed; otherwise the first
+            is kept.  Clips that pass (most gestures) never pay for the slower ZMP solve.  0 =
             never re-solve.
     """
 
@@ -726,8 +728,9 @@ class Pipeline:
             model=motion.model, notes=notes, retime_factor=retime_factor, zmp_weight=zmp_weight)
 
     def _balance_retargeter(self, entry: dict):
-        """The robot's retargeter with the ZMP term at ``balance_zmp_weight`` (built once per robot
-        and weight; its compiled window problems are kept like the plain retargeter's)."""
+        """The robot's retargeter with the ZMP term at ``balance_zmp_weight`` and a foot planted in
+        every frame (contact support ``"always"``); built once per robot and weight, its compiled
+        window problems are kept like the plain retargeter's."""
         from dataclasses import replace
 
         from retarget.solve import Retargeter
@@ -736,12 +739,14 @@ class Pipeline:
         cache = entry.setdefault("balance_retargeters", {})
         if weight not in cache:
             base = entry["retargeter"]
-            cache[weight] = Retargeter(base.robot, replace(base.config, weights=replace(base.config.weights, zmp=weight)))
+            cache[weight] = Retargeter(base.robot, replace(base.config, weights=replace(base.config.weights, zmp=weight),
+                                                           contacts=replace(base.config.contacts, support="always")))
         return cache[weight]
 
     def _rebalance(self, entry: dict, motion, robot_path: Path, unbalanced: set, validation, validate_robot_file,
                    notes: list[str]):
-        """Retarget ``motion`` again with the ZMP term (``balance_zmp_weight``) and validate it.
+        """Retarget ``motion`` again with the ZMP term (``balance_zmp_weight``) and a foot planted in
+        every frame, and validate it.
         Keeps the new trajectory in ``robot_path`` and returns ``(retarget result, trajectory,
         validation)`` when the checks it fails, speed checks aside, are a strict subset of those
         that failed before; otherwise restores the first trajectory and returns None."""
@@ -757,11 +762,12 @@ class Pipeline:
         listed = ", ".join(sorted(unbalanced))
         if after - SPEED_CHECKS < before - SPEED_CHECKS:
             now = "every check passes" if not after else f"fails {', '.join(sorted(after))}"
-            notes.append(f"balance: {listed} failed; retargeted again with the ZMP term (weight {weight:g}), the "
-                         f"trajectory kept: {now}")
+            notes.append(f"balance: {listed} failed; retargeted again with the ZMP term (weight {weight:g}) and a "
+                         f"foot planted in every frame, the trajectory kept: {now}")
             return rt, trajectory, balanced
         robot_path.write_bytes(original_bytes)
-        notes.append(f"balance: {listed} failed; retargeting again with the ZMP term (weight {weight:g}) failed "
+        notes.append(f"balance: {listed} failed; retargeting again with the ZMP term (weight {weight:g}) and a foot "
+                     f"planted in every frame failed "
                      f"{', '.join(sorted(after)) or 'nothing'} instead, not fewer checks, so the first trajectory is kept")
         return None
 

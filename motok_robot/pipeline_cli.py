@@ -61,9 +61,10 @@ def register(commands, groups) -> None:
                         "joint_acceleration check fails), play it up to S times slower until those checks pass "
                         "(default %(default)g; 1 = never)")
     parser.add_argument("--balance-zmp-weight", type=float, default=PipelineConfig.balance_zmp_weight, metavar="W",
-                        help="when the robot loses balance (the zmp, static_balance, center_of_pressure, fall or "
-                        "base_drift check fails) after retargeting without the ZMP term, retarget again with this ZMP "
-                        "weight and keep that trajectory if it fails fewer checks (default %(default)g; 0 = never)")
+                        help="when the robot loses its footing or balance (the floating, zmp, static_balance, "
+                        "center_of_pressure, fall or base_drift check fails) after retargeting without the ZMP term, "
+                        "retarget again with this ZMP weight and a foot planted in every frame (--support always) and "
+                        "keep that trajectory if it fails fewer checks (default %(default)g; 0 = never)")
     add_balance_arguments(parser.add_argument_group("retargeting"))
     models = parser.add_argument_group("models")
     models.add_argument("--planner", choices=("masked", "ar"), default="masked", help="planner (default masked)")

@@ -114,6 +114,13 @@ def test_no_strict_improvement_keeps_the_first_trajectory(tmp_path, monkeypatch,
     assert any(n.startswith("balance:") and "first trajectory is kept" in n for n in result.notes)
 
 
+def test_both_feet_in_the_air_alone_calls_for_the_repair(tmp_path, monkeypatch, fake_resolve):
+    """A flight phase (``floating``) cannot pass on a servo humanoid: the re-solve plants a foot."""
+    _fake_validation(monkeypatch, [["floating"], []])
+    result = _run(tmp_path, "floating")
+    assert len(fake_resolve) == 1 and result.passed and result.zmp_weight == PipelineConfig.balance_zmp_weight
+
+
 def test_a_speed_check_does_not_block_the_repair_but_balance_must_improve(tmp_path, monkeypatch, fake_resolve):
     """Speed checks are left to retiming: trading ``zmp`` for ``joint_velocity`` is kept."""
     _fake_validation(monkeypatch, [["zmp"], ["joint_velocity"]])
@@ -121,7 +128,7 @@ def test_a_speed_check_does_not_block_the_repair_but_balance_must_improve(tmp_pa
 
 
 @pytest.mark.parametrize("first, config", [
-    (["self_collision"], {}),                                              # not a balance check
+    (["self_collision"], {}),                                              # not a footing or balance check
     ([], {}),                                                              # passed
     (["zmp", "fall"], {"balance_zmp_weight": 0.0}),                        # repair off
     (["zmp", "fall"], {"retarget": replace(RetargetConfig(), weights=replace(RetargetConfig().weights, zmp=300.0))}),
@@ -135,12 +142,13 @@ def test_no_repair_when_balanced_off_or_already_with_the_zmp_term(tmp_path, monk
     assert result.zmp_weight == zmp
 
 
-def test_balance_retargeter_differs_only_in_the_zmp_weight():
+def test_balance_retargeter_differs_only_in_the_zmp_weight_and_contact_support():
     pipe = Pipeline(PipelineConfig(balance_zmp_weight=250.0))
     entry = pipe.robot("op3_like")
     balanced = pipe._balance_retargeter(entry)
-    assert balanced.config.weights.zmp == 250.0
-    assert replace(balanced.config, weights=entry["retargeter"].config.weights) == entry["retargeter"].config
+    assert balanced.config.weights.zmp == 250.0 and balanced.config.contacts.support == "always"
+    plain = entry["retargeter"].config
+    assert replace(balanced.config, weights=plain.weights, contacts=plain.contacts) == plain
     assert pipe._balance_retargeter(entry) is balanced  # built once per robot and weight
     assert BALANCE_CHECKS.isdisjoint({"torque", "joint_velocity", "joint_acceleration"})
 
