@@ -15,7 +15,7 @@ import pytest
 from motok_robot.errors import InputError
 from motok_robot.sim import synthetic as S
 from motok_robot.sim.config import ValidationConfig
-from motok_robot.sim.dynamics import zmp_from_centroidal
+from motok_robot.sim.dynamics import finite_difference, moving_average, zmp_from_centroidal
 from motok_robot.sim.geometry import convex_hull, signed_distance
 from motok_robot.sim.kinematic import replay
 from motok_robot.sim.model_index import body_pairs_in_collision, index_robot
@@ -80,6 +80,30 @@ def test_cart_table_zmp_matches_the_analytic_formula():
     np.testing.assert_allclose(zmp2[:, 0] - zmp[:, 0], -0.5 / (3.0 * 9.81), atol=1e-12)
     free_fall = zmp_from_centroidal(com[:1], np.array([[0.0, 0.0, -9.81]]), None, mass=3.0)
     assert np.isnan(free_fall).all()
+
+
+@pytest.mark.parametrize("window", [3, 4, 5])
+def test_smoothing_keeps_a_constant_rate_and_averages_inside(window):
+    """The ZMP's CoM smoothing must not invent an acceleration at the clip ends: a series that
+    changes at a constant rate has zero second difference after smoothing, first frames included."""
+    t = np.arange(30) / FPS
+    line = np.stack([0.2 * t, -0.1 * t, np.full_like(t, 0.3)], axis=1)
+    acc = finite_difference(finite_difference(moving_average(line, window), FPS), FPS)
+    np.testing.assert_allclose(acc, 0.0, atol=1e-9)
+    x = np.random.default_rng(0).normal(size=(12, 2))
+    pad = window // 2
+    inside = np.mean([x[k:len(x) - window + 1 + k] for k in range(window)], axis=0)
+    np.testing.assert_allclose(moving_average(x, window)[pad:pad + len(inside)], inside, atol=1e-12)
+    assert moving_average(x[:window - 1], window).shape == (window - 1, 2)  # shorter than the window: as is
+
+
+def test_zmp_of_a_robot_gliding_at_constant_speed_stays_under_its_com(tiny):
+    """A standing pose translated at a constant 0.2 m/s has no acceleration: its ZMP is the CoM
+    projection on every frame, the first and last ones too."""
+    qpos = S.standing(tiny, 1.0, FPS).copy()
+    qpos[:, 0] += 0.2 * np.arange(len(qpos)) / FPS
+    kin = replay(tiny, qpos, FPS, ValidationConfig())
+    np.testing.assert_allclose(kin.zmp, kin.com[:, :2], atol=1e-6)
 
 
 def test_inverse_dynamics_ground_reaction_carries_the_weight(tiny):

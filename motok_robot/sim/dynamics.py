@@ -81,11 +81,21 @@ def finite_difference(values: np.ndarray, fps: float) -> np.ndarray:
 
 
 def moving_average(values: np.ndarray, window: int) -> np.ndarray:
-    """Centred moving average along axis 0 with edge padding; ``window`` <= 1 returns a copy."""
+    """Centred moving average along axis 0; ``window`` <= 1 returns a copy.
+
+    The ends are padded by odd reflection (``2 x[0] - x[k]``: the series continued on the line
+    through its end), so a series that changes at a constant rate smooths to itself.  Padding
+    with the end value instead made a CoM moving at constant speed look like it accelerated at
+    the first and last frames of every clip (``v / 6 dt``: 0.7 m/s^2 at 0.2 m/s and 20 fps, a
+    1.7 cm ZMP shift once differentiated twice).
+    """
     if window <= 1 or values.shape[0] < window:
         return values.copy()
     pad = window // 2
-    padded = np.concatenate([np.repeat(values[:1], pad, 0), values, np.repeat(values[-1:], window - 1 - pad, 0)])
+    after = window - 1 - pad
+    head = 2 * values[:1] - values[pad:0:-1]
+    tail = 2 * values[-1:] - values[-2:-2 - after:-1]
+    padded = np.concatenate([head, values, tail])
     kernel = np.ones(window) / window
     flat = padded.reshape(padded.shape[0], -1)
     out = np.stack([np.convolve(flat[:, k], kernel, mode="valid") for k in range(flat.shape[1])], axis=1)
