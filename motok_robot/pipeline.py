@@ -30,8 +30,9 @@ to real servos on ``port`` in real time and only when the validation report pass
 verdict says FAIL, and hardware playback is refused.
 
 Two repairs follow a failed validation, each kept only when it trades no passing check for a
-failing one (thresholds are never changed): when the robot loses balance, the motion is
-retargeted again with the ZMP term (``PipelineConfig.balance_zmp_weight``; stage ``balance``),
+failing one (thresholds are never changed): when the robot loses its footing or balance, the
+motion is retargeted again with the ZMP term and a foot planted in every frame
+(``PipelineConfig.balance_zmp_weight``; stage ``balance``),
 and when it asks more than the servos have, the robot plays it slower
 (``PipelineConfig.max_retime``; stage ``retime``).  ``summary.md`` notes what was done.
 
@@ -674,8 +675,8 @@ class Pipeline:
         if unbalanced and cfg.balance_zmp_weight > 0 and zmp_weight == 0:
             stage("balance")
             t = time.perf_counter()
-            rebalanced = self._rebalance(entry, motion, files["robot"], unbalanced, validation, validate_robot_file,
-                                         notes)
+            rebalanced = self._rebalance(entry, motion, files["robot"], rt, unbalanced, validation,
+                                         validate_robot_file, notes)
             if rebalanced is not None:
                 rt, trajectory, validation = rebalanced
                 zmp_weight = cfg.balance_zmp_weight
@@ -743,13 +744,14 @@ class Pipeline:
                                                            contacts=replace(base.config.contacts, support="always")))
         return cache[weight]
 
-    def _rebalance(self, entry: dict, motion, robot_path: Path, unbalanced: set, validation, validate_robot_file,
-                   notes: list[str]):
+    def _rebalance(self, entry: dict, motion, robot_path: Path, first, unbalanced: set, validation,
+                   validate_robot_file, notes: list[str]):
         """Retarget ``motion`` again with the ZMP term (``balance_zmp_weight``) and a foot planted in
-        every frame, and validate it.
-        Keeps the new trajectory in ``robot_path`` and returns ``(retarget result, trajectory,
-        validation)`` when the checks it fails, speed checks aside, are a strict subset of those
-        that failed before; otherwise restores the first trajectory and returns None."""
+        every frame, and validate it.  Keeps the new trajectory in ``robot_path`` and returns
+        ``(retarget result, trajectory, validation)`` when the checks it fails, speed checks
+        aside, are a strict subset of those that failed before and no more solver windows failed
+        than in ``first`` (the first retargeting result); otherwise restores the first trajectory
+        and returns None."""
         from retarget.io import write_robot_npz
 
         weight = self.config.balance_zmp_weight
@@ -760,6 +762,12 @@ class Pipeline:
         trajectory, balanced = validate_robot_file()
         after = set(balanced.report["failed_checks"])
         listed = ", ".join(sorted(unbalanced))
+        unsolved = len(rt.failed_windows()) - len(first.failed_windows())
+        if unsolved > 0:
+            robot_path.write_bytes(original_bytes)
+            notes.append(f"balance: {listed} failed; retargeting again with the ZMP term (weight {weight:g}) left "
+                         f"{unsolved} more solver window(s) unconverged, so the first trajectory is kept")
+            return None
         if after - SPEED_CHECKS < before - SPEED_CHECKS:
             now = "every check passes" if not after else f"fails {', '.join(sorted(after))}"
             notes.append(f"balance: {listed} failed; retargeted again with the ZMP term (weight {weight:g}) and a "

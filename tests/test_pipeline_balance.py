@@ -54,8 +54,13 @@ def _fake_validation(monkeypatch, verdicts: list[list[str]]) -> list[np.ndarray]
 
 @pytest.fixture
 def fake_resolve(monkeypatch):
-    """The balance retargeter is the plain one with its result's first joint shifted by SHIFT."""
-    calls = []
+    """The balance retargeter is the plain one with its result's first joint shifted by SHIFT
+    (and its first solver window marked failed when ``calls.fail_window`` is set)."""
+
+    class Calls(list):
+        fail_window = False
+
+    calls = Calls()
 
     class Shifted:
         def __init__(self, base):
@@ -66,6 +71,8 @@ def fake_resolve(monkeypatch):
             rt = self.base.run(joints, fps, **kwargs)
             rt.qpos = rt.qpos.copy()
             rt.qpos[:, 7] += SHIFT
+            if calls.fail_window:
+                rt.windows[0] = replace(rt.windows[0], success=False, status="Infeasible_Problem_Detected")
             return rt
 
     monkeypatch.setattr(Pipeline, "_balance_retargeter", lambda self, entry: Shifted(entry["retargeter"]))
@@ -112,6 +119,17 @@ def test_no_strict_improvement_keeps_the_first_trajectory(tmp_path, monkeypatch,
     assert sorted(result.failed_checks) == ["base_drift", "fall", "zmp"]
     assert _check_report_is_for_the_file(result)["failed_checks"] == result.failed_checks
     assert any(n.startswith("balance:") and "first trajectory is kept" in n for n in result.notes)
+
+
+def test_a_resolve_with_an_unconverged_window_is_not_kept(tmp_path, monkeypatch, fake_resolve):
+    """Better checks do not buy a solver window that did not converge: the first solve stays."""
+    fake_resolve.fail_window = True
+    seen = _fake_validation(monkeypatch, [["zmp", "fall"], []])
+    result = _run(tmp_path, "unsolved")
+    assert len(fake_resolve) == 1 and result.zmp_weight == 0.0
+    assert np.array_equal(read_robot_npz(result.files["robot"]).qpos, seen[0])
+    assert sorted(result.failed_checks) == ["fall", "zmp"]
+    assert any(n.startswith("balance:") and "unconverged" in n for n in result.notes)
 
 
 def test_both_feet_in_the_air_alone_calls_for_the_repair(tmp_path, monkeypatch, fake_resolve):
