@@ -479,6 +479,8 @@ class Pipeline:
             setattr(config, key, value)
         if config.planner not in ("masked", "ar"):
             raise InputError(f"planner must be 'masked' or 'ar', got {config.planner!r}")
+        if not config.max_retime >= 1:  # also rejects NaN
+            raise InputError(f"max_retime (--max-retime) must be >= 1 (1 = never slow down), got {config.max_retime}")
         if not config.balance_zmp_weight >= 0:  # also rejects NaN
             raise InputError(f"balance_zmp_weight (--balance-zmp-weight) must be >= 0, got {config.balance_zmp_weight}")
         self.config = config

@@ -244,6 +244,7 @@ def test_cli_invalid_input_is_one_line_before_any_work(runs, tmp_path, capsys):
         (["run", "a person walks", "--zmp-weight", "-1", "--out", str(out)], "--zmp-weight must be >= 0"),
         (["run", "a person walks", "--com-weight", "nan", "--out", str(out)], "--com-weight must be >= 0"),
         (["run", "a person walks", "--double-support", "-2", "--out", str(out)], "--double-support must be >= 0"),
+        (["run", "a person walks", "--max-retime", "0.5", "--out", str(out)], "(--max-retime) must be >= 1"),
     ]
     for argv, message in cases:
         assert main(argv + _model_args(runs)) == 2, argv

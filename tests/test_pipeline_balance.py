@@ -177,6 +177,12 @@ def test_a_negative_balance_weight_is_refused(weight):
         Pipeline(balance_zmp_weight=weight)
 
 
+@pytest.mark.parametrize("factor", [0.5, float("nan")])
+def test_a_retime_ceiling_below_one_is_refused(factor):
+    with pytest.raises(InputError, match="max_retime"):
+        Pipeline(max_retime=factor)
+
+
 def test_cli_balance_weight_reaches_the_pipeline_and_bad_values_are_one_line(tmp_path, monkeypatch, capsys):
     from motok_robot import pipeline
     from motok_robot.cli import main
