@@ -751,9 +751,10 @@ class Pipeline:
         """Retarget ``motion`` again with the ZMP term (``balance_zmp_weight``) and a foot planted in
         every frame, and validate it.  Keeps the new trajectory in ``robot_path`` and returns
         ``(retarget result, trajectory, validation)`` when the checks it fails, speed checks
-        aside, are a strict subset of those that failed before and no more solver windows failed
-        than in ``first`` (the first retargeting result); otherwise restores the first trajectory
-        and returns None."""
+        aside, are a strict subset of those that failed before and no more of its solver windows
+        end with a hard constraint violated than in ``first`` (the first retargeting result; a
+        window that stopped short of optimality with every constraint holding counts as
+        feasible: validation judges it); otherwise restores the first trajectory and returns None."""
         from retarget.io import write_robot_npz
 
         weight = self.config.balance_zmp_weight
@@ -764,11 +765,11 @@ class Pipeline:
         trajectory, balanced = validate_robot_file()
         after = set(balanced.report["failed_checks"])
         listed = ", ".join(sorted(unbalanced))
-        unsolved = len(rt.failed_windows()) - len(first.failed_windows())
-        if unsolved > 0:
+        infeasible = sum(w.violated is not None for w in rt.windows) - sum(w.violated is not None for w in first.windows)
+        if infeasible > 0:
             robot_path.write_bytes(original_bytes)
             notes.append(f"balance: {listed} failed; retargeting again with the ZMP term (weight {weight:g}) left "
-                         f"{unsolved} more solver window(s) unconverged, so the first trajectory is kept")
+                         f"{infeasible} more solver window(s) with a constraint violated, so the first trajectory is kept")
             return None
         if after - SPEED_CHECKS < before - SPEED_CHECKS:
             now = "every check passes" if not after else f"fails {', '.join(sorted(after))}"

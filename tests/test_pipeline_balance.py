@@ -54,11 +54,11 @@ def _fake_validation(monkeypatch, verdicts: list[list[str]]) -> list[np.ndarray]
 
 @pytest.fixture
 def fake_resolve(monkeypatch):
-    """The balance retargeter is the plain one with its result's first joint shifted by SHIFT
-    (and its first solver window marked failed when ``calls.fail_window`` is set)."""
+    """The balance retargeter is the plain one with its result's first joint shifted by SHIFT;
+    ``calls.window`` replaces the fields of its first solver window's report."""
 
     class Calls(list):
-        fail_window = False
+        window: dict = {}
 
     calls = Calls()
 
@@ -71,8 +71,7 @@ def fake_resolve(monkeypatch):
             rt = self.base.run(joints, fps, **kwargs)
             rt.qpos = rt.qpos.copy()
             rt.qpos[:, 7] += SHIFT
-            if calls.fail_window:
-                rt.windows[0] = replace(rt.windows[0], success=False, status="Infeasible_Problem_Detected")
+            rt.windows[0] = replace(rt.windows[0], **calls.window)
             return rt
 
     monkeypatch.setattr(Pipeline, "_balance_retargeter", lambda self, entry: Shifted(entry["retargeter"]))
@@ -121,15 +120,26 @@ def test_no_strict_improvement_keeps_the_first_trajectory(tmp_path, monkeypatch,
     assert any(n.startswith("balance:") and "first trajectory is kept" in n for n in result.notes)
 
 
-def test_a_resolve_with_an_unconverged_window_is_not_kept(tmp_path, monkeypatch, fake_resolve):
-    """Better checks do not buy a solver window that did not converge: the first solve stays."""
-    fake_resolve.fail_window = True
+def test_a_resolve_with_a_violated_constraint_is_not_kept(tmp_path, monkeypatch, fake_resolve):
+    """Better checks do not buy a solver window whose hard constraints do not hold: the first solve stays."""
+    fake_resolve.window = dict(success=False, status="Infeasible_Problem_Detected", violated="frame 3: no slip",
+                               violation=0.01)
     seen = _fake_validation(monkeypatch, [["zmp", "fall"], []])
-    result = _run(tmp_path, "unsolved")
+    result = _run(tmp_path, "infeasible")
     assert len(fake_resolve) == 1 and result.zmp_weight == 0.0
     assert np.array_equal(read_robot_npz(result.files["robot"]).qpos, seen[0])
     assert sorted(result.failed_checks) == ["fall", "zmp"]
-    assert any(n.startswith("balance:") and "unconverged" in n for n in result.notes)
+    assert any(n.startswith("balance:") and "constraint violated" in n for n in result.notes)
+
+
+def test_a_feasible_resolve_short_of_optimality_is_kept_and_noted(tmp_path, monkeypatch, fake_resolve):
+    """IPOPT stopping before optimality with every constraint holding is a feasible trajectory:
+    validation judges it, and the summary says the window did not converge."""
+    fake_resolve.window = dict(success=False, status="Error_In_Step_Computation", violated=None, violation=0.0)
+    _fake_validation(monkeypatch, [["zmp", "fall"], []])
+    result = _run(tmp_path, "short")
+    assert result.passed and result.zmp_weight == PipelineConfig.balance_zmp_weight
+    assert any("did not converge" in n and "Error_In_Step_Computation" in n for n in result.notes)
 
 
 def test_both_feet_in_the_air_alone_calls_for_the_repair(tmp_path, monkeypatch, fake_resolve):
