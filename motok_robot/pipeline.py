@@ -1037,9 +1037,12 @@ def _retargeting_notes(rt) -> list[str]:
                      f"drove into each other ({', '.join(rt.collision_pairs)})")
     failed_windows = rt.failed_windows()
     if failed_windows:
+        violated = [w.violated for w in failed_windows if w.violated is not None]
+        holding = (f"{len(violated)} with a constraint violated (first: {violated[0]})" if violated
+                   else "every constraint holds")
         notes.append(f"retargeting: {len(failed_windows)}/{len(rt.windows)} solver windows did not converge "
                      f"(first: frames {failed_windows[0].start}-{failed_windows[0].stop}, "
-                     f"{failed_windows[0].status})")
+                     f"{failed_windows[0].status}; {holding})")
     return notes
 
 
