@@ -4,7 +4,8 @@ Targets on 2 CPU cores: generation <= 1 s, retargeting <= 1 s, validation <= 1 s
 
     python benchmarks/bench_pipeline.py [--robot op3_like] [--seconds 6] [--repeat 5] [--threads 2]
         [--tokenizer RUN --planner-run RUN] [--random-init] [--motion motion.npz]
-        [--outputs] [--profile generate|retarget|validate] [--json benchmarks/results/bench_pipeline.json]
+        [--outputs] [--balance [--balance-repeat N]] [--profile generate|retarget|validate]
+        [--json benchmarks/results/bench_pipeline.json]
 
 Each stage runs exactly as :class:`motok_robot.pipeline.Pipeline` runs it, after one warm-up:
 
@@ -17,6 +18,11 @@ Each stage runs exactly as :class:`motok_robot.pipeline.Pipeline` runs it, after
   beforehand: ``setup`` is reported once, apart).
 * **validate**: kinematic checks, inverse dynamics, balance and the physics rollout (no plots,
   no video; ``--outputs`` times those once, apart).
+* **balance** (``--balance``): the re-solve of the pipeline's balance repair (ZMP term at
+  ``PipelineConfig.balance_zmp_weight``, a foot planted in every frame, self-collision
+  avoidance) of the same clip, as ``run`` performs it for a clip that loses balance; its first
+  run (problem compiles included) is reported apart as ``balance_setup``.  It has no target:
+  clips that keep their balance never pay it.
 
 The motion retargeted and validated is the generated one with trained models; otherwise (or
 with ``--motion``) the procedural 6 s walk of :mod:`motok_robot.motion.synthetic` or the given
@@ -77,6 +83,10 @@ def main() -> int:
                         help="time generation with default-size models of random weights (no trained models needed)")
     parser.add_argument("--motion", type=Path, default=None, help="retarget/validate this motion.npz instead")
     parser.add_argument("--outputs", action="store_true", help="also time the plots and the video once")
+    parser.add_argument("--balance", action="store_true",
+                        help="also time the balance repair's re-solve of the clip (slow: tens of seconds a run)")
+    parser.add_argument("--balance-repeat", type=int, default=3, metavar="N",
+                        help="runs of the balance re-solve after its first (default 3)")
     parser.add_argument("--profile", choices=("generate", "retarget", "validate"), action="append", default=[],
                         help="print a cProfile of one run of this stage (repeatable)")
     parser.add_argument("--json", type=Path, default=RESULTS_DIR / "bench_pipeline.json")
@@ -87,7 +97,7 @@ def main() -> int:
 
     torch.set_num_threads(args.threads)
     from motok_robot.motion.skeleton import FPS
-    from motok_robot.pipeline import load_robot_stages
+    from motok_robot.pipeline import BALANCE_CHECKS, PipelineConfig, balance_retargeter, load_robot_stages
     from motok_robot.sim.trajectory import RobotTrajectory
     from motok_robot.sim.validate import validate_trajectory
 
@@ -185,6 +195,22 @@ def main() -> int:
     results["validate"]["passed"] = val.passed
     results["validate"]["failed_checks"] = val.report["failed_checks"]
 
+    if args.balance:
+        balanced = balance_retargeter(entry, PipelineConfig.balance_zmp_weight)
+        t = time.perf_counter()
+        balanced.run(joints, fps, progress=False)
+        results["balance_setup"] = {"median_s": time.perf_counter() - t, "repeat": 1,
+                                    "note": "once: the first balance re-solve, its problem compiles included"}
+
+        def rebalance():
+            box["balanced"] = balanced.run(joints, fps, progress=False)
+
+        results["balance"] = time_median(rebalance, repeat=args.balance_repeat, warmup=0)
+        b = box["balanced"]
+        results["balance"].update(ipopt_iterations=[w.iterations for w in b.windows], converged=bool(b.success),
+                                  collision_pairs=len(b.collision_pairs),
+                                  needed_by_this_clip=bool(set(val.report["failed_checks"]) & BALANCE_CHECKS))
+
     if args.outputs:
         from motok_robot.sim.plots import save_plots
         from motok_robot.sim.render import render_video
@@ -199,7 +225,7 @@ def main() -> int:
 
     # ---- report
     rows = []
-    for stage in ("load", "setup", "generate", "retarget", "validate", "plots", "render"):
+    for stage in ("load", "setup", "generate", "retarget", "validate", "balance_setup", "balance", "plots", "render"):
         if stage not in results:
             continue
         r = results[stage]
@@ -210,7 +236,8 @@ def main() -> int:
                      "meets": None if target is None else (r.get("cpu_median_s", r["median_s"]) <= target,
                                                            r["median_s"] <= target)})
     machine = machine_description(args.threads)
-    print(f"\n{args.seconds:g} s clip ({len(joints)} frames) on {args.robot}; torch threads {args.threads}; "
+    clip_s = round(len(joints) / fps, 3)  # --motion: the file's length, not --seconds
+    print(f"\n{clip_s:g} s clip ({len(joints)} frames) on {args.robot}; torch threads {args.threads}; "
           f"median of {args.repeat}")
     print(machine_summary(machine))
     table_rows = [{**r, "meets": "" if r["meets"] is None else
@@ -225,11 +252,16 @@ def main() -> int:
           f"converged {rtr['converged']}")
     print(f"validate: {results['validate']['stage_s']} (last run); passed {val.passed}, "
           f"failed {', '.join(val.report['failed_checks']) or 'none'}")
+    if "balance" in results:
+        bal = results["balance"]
+        print(f"balance: iterations {bal['ipopt_iterations']}, converged {bal['converged']}, "
+              f"{bal['collision_pairs']} pairs kept apart; run would "
+              f"{'' if bal['needed_by_this_clip'] else 'NOT '}perform it for this clip (validation above)")
     for note in notes:
         print(f"note: {note}")
     for stage, text in profiles.items():
         print(f"\n--- cProfile of one {stage} run (cumulative) ---\n{text}")
-    write_json(args.json, {"benchmark": "bench_pipeline", "seconds": args.seconds, "frames": int(len(joints)),
+    write_json(args.json, {"benchmark": "bench_pipeline", "seconds": clip_s, "frames": int(len(joints)),
                            "robot": args.robot, "prompt": PROMPT, "motion": motion_source, "statistic": "median",
                            "repeat": args.repeat, "targets_s": TARGET_S, "stages": results, "notes": notes,
                            "machine": machine, "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})

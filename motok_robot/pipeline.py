@@ -458,6 +458,24 @@ def load_robot_stages(name: str, retarget_config=None) -> dict:
     return _ROBOT_STAGES[key]
 
 
+def balance_retargeter(entry: dict, weight: float):
+    """The retargeter of the balance repair for a :func:`load_robot_stages` ``entry``: its plain
+    retargeter's settings with the ZMP term at ``weight`` and a foot planted in every frame
+    (contact support ``"always"``).  Built once per robot entry and weight; its compiled window
+    problems are kept like the plain retargeter's."""
+    from dataclasses import replace
+
+    from retarget.solve import Retargeter
+
+    weight = float(weight)
+    cache = entry.setdefault("balance_retargeters", {})
+    if weight not in cache:
+        base = entry["retargeter"]
+        cache[weight] = Retargeter(base.robot, replace(base.config, weights=replace(base.config.weights, zmp=weight),
+                                                       contacts=replace(base.config.contacts, support="always")))
+    return cache[weight]
+
+
 class Pipeline:
     """Loaded models and robots; :meth:`run` turns sentences into validated robot trajectories.
 
@@ -731,20 +749,8 @@ class Pipeline:
             model=motion.model, notes=notes, retime_factor=retime_factor, zmp_weight=zmp_weight)
 
     def _balance_retargeter(self, entry: dict):
-        """The robot's retargeter with the ZMP term at ``balance_zmp_weight`` and a foot planted in
-        every frame (contact support ``"always"``); built once per robot and weight, its compiled
-        window problems are kept like the plain retargeter's."""
-        from dataclasses import replace
-
-        from retarget.solve import Retargeter
-
-        weight = float(self.config.balance_zmp_weight)
-        cache = entry.setdefault("balance_retargeters", {})
-        if weight not in cache:
-            base = entry["retargeter"]
-            cache[weight] = Retargeter(base.robot, replace(base.config, weights=replace(base.config.weights, zmp=weight),
-                                                           contacts=replace(base.config.contacts, support="always")))
-        return cache[weight]
+        """:func:`balance_retargeter` of ``entry`` at ``balance_zmp_weight``."""
+        return balance_retargeter(entry, self.config.balance_zmp_weight)
 
     def _rebalance(self, entry: dict, motion, robot_path: Path, first, unbalanced: set, validation,
                    validate_robot_file, notes: list[str]):
