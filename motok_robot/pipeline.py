@@ -171,6 +171,12 @@ class PipelineConfig:
             comes next), are a strict subset of those the first one failed; otherwise the first
             is kept.  Clips that pass (most gestures) never pay for the slower ZMP solve.  0 =
             never re-solve.
+        balance_acceleration_weight: the joint-acceleration weight (``CostWeights.acceleration``)
+            of that re-solve.  The ZMP term rewards CoM accelerations that move the ZMP under the
+            foot, and with the plain weight (5) the optimiser gets them from frame-to-frame
+            zig-zags of the stance knee, which the servos cannot deliver (the torque check then
+            fails); a stiffer weight makes it shift the CoM smoothly instead (docs/retarget.md,
+            balance repair).
     """
 
     planner: str = "masked"
@@ -186,6 +192,7 @@ class PipelineConfig:
     sim_video: bool = False
     max_retime: float = 2.0
     balance_zmp_weight: float = 1000.0
+    balance_acceleration_weight: float = 50.0
 
 
 @dataclass
@@ -234,6 +241,8 @@ class PipelineResult:
             not slowed down; see ``PipelineConfig.max_retime``).
         zmp_weight: the ZMP weight of the retargeting that made the kept trajectory (0: without
             the ZMP term; see ``PipelineConfig.balance_zmp_weight``).
+        acceleration_weight: the joint-acceleration weight of that retargeting (see
+            ``PipelineConfig.balance_acceleration_weight``).
     """
 
     out_dir: Path
@@ -251,6 +260,7 @@ class PipelineResult:
     notes: list[str] = field(default_factory=list)
     retime_factor: float = 1.0
     zmp_weight: float = 0.0
+    acceleration_weight: float = 0.0
 
     @property
     def ok(self) -> bool:
@@ -270,6 +280,7 @@ class PipelineResult:
             "timings_s": {k: round(v, 4) for k, v in self.timings.items()},
             "playback": asdict(self.playback), "model": self.model, "notes": list(self.notes),
             "retime_factor": self.retime_factor, "zmp_weight": self.zmp_weight,
+            "acceleration_weight": self.acceleration_weight,
         }
 
 
@@ -458,22 +469,25 @@ def load_robot_stages(name: str, retarget_config=None) -> dict:
     return _ROBOT_STAGES[key]
 
 
-def balance_retargeter(entry: dict, weight: float):
+def balance_retargeter(entry: dict, weight: float,
+                       acceleration: float = PipelineConfig.balance_acceleration_weight):
     """The retargeter of the balance repair for a :func:`load_robot_stages` ``entry``: its plain
-    retargeter's settings with the ZMP term at ``weight`` and a foot planted in every frame
-    (contact support ``"always"``).  Built once per robot entry and weight; its compiled window
-    problems are kept like the plain retargeter's."""
+    retargeter's settings with the ZMP term at ``weight``, the joint-acceleration weight at
+    ``acceleration`` and a foot planted in every frame (contact support ``"always"``).  Built
+    once per robot entry and weights; its compiled window problems are kept like the plain
+    retargeter's."""
     from dataclasses import replace
 
     from retarget.solve import Retargeter
 
-    weight = float(weight)
+    key = (float(weight), float(acceleration))
     cache = entry.setdefault("balance_retargeters", {})
-    if weight not in cache:
+    if key not in cache:
         base = entry["retargeter"]
-        cache[weight] = Retargeter(base.robot, replace(base.config, weights=replace(base.config.weights, zmp=weight),
-                                                       contacts=replace(base.config.contacts, support="always")))
-    return cache[weight]
+        weights = replace(base.config.weights, zmp=key[0], acceleration=key[1])
+        cache[key] = Retargeter(base.robot, replace(base.config, weights=weights,
+                                                    contacts=replace(base.config.contacts, support="always")))
+    return cache[key]
 
 
 class Pipeline:
@@ -501,6 +515,9 @@ class Pipeline:
             raise InputError(f"max_retime (--max-retime) must be >= 1 (1 = never slow down), got {config.max_retime}")
         if not config.balance_zmp_weight >= 0:  # also rejects NaN
             raise InputError(f"balance_zmp_weight (--balance-zmp-weight) must be >= 0, got {config.balance_zmp_weight}")
+        if not config.balance_acceleration_weight >= 0:
+            raise InputError("balance_acceleration_weight (--balance-acceleration-weight) must be >= 0, "
+                             f"got {config.balance_acceleration_weight}")
         self.config = config
         self._generator = None
         self._robots: dict[str, dict] = {}
@@ -672,6 +689,7 @@ class Pipeline:
         files["robot"] = write_robot_npz(tmp / "robot.npz", rt)
         timings["retarget"] = time.perf_counter() - t
         zmp_weight = float(entry["retargeter"].config.weights.zmp)
+        acceleration_weight = float(entry["retargeter"].config.weights.acceleration)
         bar.update()
 
         # 3. validation -> report.json, plots, video.mp4
@@ -700,6 +718,7 @@ class Pipeline:
             if rebalanced is not None:
                 rt, trajectory, validation = rebalanced
                 zmp_weight = cfg.balance_zmp_weight
+                acceleration_weight = cfg.balance_acceleration_weight
             timings["balance"] = time.perf_counter() - t
         notes[:0] = _retargeting_notes(rt)
         retime_factor = 1.0
@@ -746,11 +765,12 @@ class Pipeline:
             out_dir=tmp, text=req["text"] or motion.text, robot=entry["robot"].name, seconds=float(motion.seconds),
             seed=req["seed"], files=files, passed=bool(report["passed"]),
             failed_checks=list(report["failed_checks"]), timings=timings, playback=pb, report=report,
-            model=motion.model, notes=notes, retime_factor=retime_factor, zmp_weight=zmp_weight)
+            model=motion.model, notes=notes, retime_factor=retime_factor, zmp_weight=zmp_weight,
+            acceleration_weight=acceleration_weight)
 
     def _balance_retargeter(self, entry: dict):
         """:func:`balance_retargeter` of ``entry`` at ``balance_zmp_weight``."""
-        return balance_retargeter(entry, self.config.balance_zmp_weight)
+        return balance_retargeter(entry, self.config.balance_zmp_weight, self.config.balance_acceleration_weight)
 
     def _rebalance(self, entry: dict, motion, robot_path: Path, first, unbalanced: set, validation,
                    validate_robot_file, notes: list[str]):
@@ -763,7 +783,8 @@ class Pipeline:
         feasible: validation judges it); otherwise restores the first trajectory and returns None."""
         from retarget.io import write_robot_npz
 
-        weight = self.config.balance_zmp_weight
+        weights = (f"weight {self.config.balance_zmp_weight:g}, "
+                   f"acceleration weight {self.config.balance_acceleration_weight:g}")
         original_bytes = robot_path.read_bytes()
         before = set(validation.report["failed_checks"])
         rt = self._balance_retargeter(entry).run(motion.joints, float(motion.fps), progress=False, source="motion.npz")
@@ -774,16 +795,16 @@ class Pipeline:
         infeasible = sum(w.violated is not None for w in rt.windows) - sum(w.violated is not None for w in first.windows)
         if infeasible > 0:
             robot_path.write_bytes(original_bytes)
-            notes.append(f"balance: {listed} failed; retargeting again with the ZMP term (weight {weight:g}) left "
+            notes.append(f"balance: {listed} failed; retargeting again with the ZMP term ({weights}) left "
                          f"{infeasible} more solver window(s) with a constraint violated, so the first trajectory is kept")
             return None
         if after - SPEED_CHECKS < before - SPEED_CHECKS:
             now = "every check passes" if not after else f"fails {', '.join(sorted(after))}"
-            notes.append(f"balance: {listed} failed; retargeted again with the ZMP term (weight {weight:g}) and a "
+            notes.append(f"balance: {listed} failed; retargeted again with the ZMP term ({weights}) and a "
                          f"foot planted in every frame, the trajectory kept: {now}")
             return rt, trajectory, balanced
         robot_path.write_bytes(original_bytes)
-        notes.append(f"balance: {listed} failed; retargeting again with the ZMP term (weight {weight:g}) and a foot "
+        notes.append(f"balance: {listed} failed; retargeting again with the ZMP term ({weights}) and a foot "
                      f"planted in every frame failed "
                      f"{', '.join(sorted(after)) or 'nothing'} instead, not fewer checks, so the first trajectory is kept")
         return None
@@ -1073,7 +1094,8 @@ def summary_markdown(result: PipelineResult) -> str:
     lines = [f"# {verdict}: \"{result.text}\"", "",
              f"* robot: `{result.robot}`; clip: {result.seconds:.2f} s; seed: {result.seed}"
              + (f"; the robot plays it {result.retime_factor:g}x slower (servo limits)" if result.retime_factor != 1.0 else "")
-             + (f"; retargeted with the ZMP term (weight {result.zmp_weight:g})" if result.zmp_weight > 0 else ""),
+             + (f"; retargeted with the ZMP term (weight {result.zmp_weight:g}, acceleration weight "
+                f"{result.acceleration_weight:g})" if result.zmp_weight > 0 else ""),
              f"* models: `{result.model}`" if result.model else "* models: -",
              f"* validation: **{verdict}**"
              + (f" - failing checks: {', '.join(f'`{c}`' for c in result.failed_checks)}" if result.failed_checks else

@@ -22,6 +22,7 @@ from pathlib import Path
 def register(commands, groups) -> None:
     from motok_robot.pipeline import PipelineConfig  # light: no torch, mujoco or casadi at import
     from retarget.cli import add_balance_arguments  # light: no casadi at import
+    from retarget.config import CostWeights
 
     parser = commands.add_parser(
         "run", help="one command: text -> motion -> robot trajectory -> MuJoCo validation -> playback",
@@ -65,6 +66,11 @@ def register(commands, groups) -> None:
                         "center_of_pressure, fall or base_drift check fails) after retargeting without the ZMP term, "
                         "retarget again with this ZMP weight and a foot planted in every frame (--support always) and "
                         "keep that trajectory if it fails fewer checks (default %(default)g; 0 = never)")
+    parser.add_argument("--balance-acceleration-weight", type=float,
+                        default=PipelineConfig.balance_acceleration_weight, metavar="W",
+                        help="joint-acceleration weight of that re-solve: keeps the ZMP term from balancing with "
+                        "frame-to-frame zig-zags the servos cannot follow (default %(default)g; plain retargeting: "
+                        f"{CostWeights.acceleration:g})")
     add_balance_arguments(parser.add_argument_group("retargeting"))
     models = parser.add_argument_group("models")
     models.add_argument("--planner", choices=("masked", "ar"), default="masked", help="planner (default masked)")
@@ -129,7 +135,8 @@ def run_command(args: argparse.Namespace) -> int:
     pipe = Pipeline(PipelineConfig(planner=args.planner, tokenizer_run=args.tokenizer, planner_run=args.planner_run,
                                    device=args.device, generation=generation, plots=not args.no_plots,
                                    realtime=args.realtime, sim_video=args.sim_video, max_retime=args.max_retime,
-                                   balance_zmp_weight=args.balance_zmp_weight, retarget=retarget_config))
+                                   balance_zmp_weight=args.balance_zmp_weight,
+                                   balance_acceleration_weight=args.balance_acceleration_weight, retarget=retarget_config))
     if args.prompts is not None:
         return _run_batch(pipe, prompts, args, robot, playback)
 

@@ -100,9 +100,11 @@ def test_fewer_failing_checks_keep_the_rebalanced_trajectory(tmp_path, monkeypat
     assert np.array_equal(kept, seen[1])  # the file holds the re-solved trajectory ...
     assert _check_report_is_for_the_file(result)["failed_checks"] == ["torque"]  # ... and the report is its own
     assert any(n.startswith("balance:") and "kept" in n for n in result.notes)
-    assert json.loads(result.files["result"].read_text())["zmp_weight"] == PipelineConfig.balance_zmp_weight
+    recorded = json.loads(result.files["result"].read_text())
+    assert recorded["zmp_weight"] == PipelineConfig.balance_zmp_weight
+    assert recorded["acceleration_weight"] == result.acceleration_weight == PipelineConfig.balance_acceleration_weight
     summary = result.files["summary"].read_text()
-    assert "ZMP term (weight 1000)" in summary and "| balance |" in summary
+    assert "ZMP term (weight 1000, acceleration weight 50)" in summary and "| balance |" in summary
 
 
 @pytest.mark.parametrize("after", [
@@ -114,7 +116,7 @@ def test_no_strict_improvement_keeps_the_first_trajectory(tmp_path, monkeypatch,
     result = _run(tmp_path, "reverted")
     assert len(fake_resolve) == 1 and len(seen) == 2
     assert np.array_equal(read_robot_npz(result.files["robot"]).qpos, seen[0])  # the first solve, restored
-    assert result.zmp_weight == 0.0
+    assert result.zmp_weight == 0.0 and result.acceleration_weight == RetargetConfig().weights.acceleration
     assert sorted(result.failed_checks) == ["base_drift", "fall", "zmp"]
     assert _check_report_is_for_the_file(result)["failed_checks"] == result.failed_checks
     assert any(n.startswith("balance:") and "first trajectory is kept" in n for n in result.notes)
@@ -171,21 +173,26 @@ def test_no_repair_when_balanced_off_or_already_with_the_zmp_term(tmp_path, monk
     assert result.zmp_weight == zmp
 
 
-def test_balance_retargeter_differs_only_in_the_zmp_weight_and_contact_support():
-    pipe = Pipeline(PipelineConfig(balance_zmp_weight=250.0))
+def test_balance_retargeter_differs_only_in_the_zmp_and_acceleration_weights_and_contact_support():
+    pipe = Pipeline(PipelineConfig(balance_zmp_weight=250.0, balance_acceleration_weight=40.0))
     entry = pipe.robot("op3_like")
     balanced = pipe._balance_retargeter(entry)
-    assert balanced.config.weights.zmp == 250.0 and balanced.config.contacts.support == "always"
+    weights = balanced.config.weights
+    assert weights.zmp == 250.0 and weights.acceleration == 40.0 and balanced.config.contacts.support == "always"
     plain = entry["retargeter"].config
+    assert replace(weights, zmp=plain.weights.zmp, acceleration=plain.weights.acceleration) == plain.weights
     assert replace(balanced.config, weights=plain.weights, contacts=plain.contacts) == plain
-    assert pipe._balance_retargeter(entry) is balanced  # built once per robot and weight
+    assert pipe._balance_retargeter(entry) is balanced  # built once per robot and weights
+    other = Pipeline(PipelineConfig(balance_zmp_weight=250.0, balance_acceleration_weight=5.0))
+    assert other._balance_retargeter(entry) is not balanced
     assert BALANCE_CHECKS.isdisjoint({"torque", "joint_velocity", "joint_acceleration"})
 
 
 @pytest.mark.parametrize("weight", [-1.0, float("nan")])
-def test_a_negative_balance_weight_is_refused(weight):
-    with pytest.raises(InputError, match="balance_zmp_weight"):
-        Pipeline(balance_zmp_weight=weight)
+@pytest.mark.parametrize("name", ["balance_zmp_weight", "balance_acceleration_weight"])
+def test_a_negative_balance_weight_is_refused(name, weight):
+    with pytest.raises(InputError, match=name):
+        Pipeline(**{name: weight})
 
 
 @pytest.mark.parametrize("factor", [0.5, float("nan")])
@@ -211,14 +218,16 @@ def test_cli_balance_weight_reaches_the_pipeline_and_bad_values_are_one_line(tmp
     np.savez(tmp_path / "m.npz", joints=np.zeros((4, 22, 3)), features=np.zeros((4, 263)))
     monkeypatch.setattr(pipeline.Pipeline, "__init__", capture)
     with pytest.raises(Stop):
-        main(["run", "--motion", "m.npz", "--balance-zmp-weight", "300", "--out", str(tmp_path / "o")])
-    assert seen["config"].balance_zmp_weight == 300.0
+        main(["run", "--motion", "m.npz", "--balance-zmp-weight", "300", "--balance-acceleration-weight", "30",
+              "--out", str(tmp_path / "o")])
+    assert seen["config"].balance_zmp_weight == 300.0 and seen["config"].balance_acceleration_weight == 30.0
     monkeypatch.undo()
     monkeypatch.chdir(tmp_path)
-    assert main(["run", "--motion", "m.npz", "--balance-zmp-weight", "-5", "--out", str(tmp_path / "o")]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--balance-zmp-weight" in err[0]
-    assert not (tmp_path / "o").exists()
+    for option in ("--balance-zmp-weight", "--balance-acceleration-weight"):
+        assert main(["run", "--motion", "m.npz", option, "-5", "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and option in err[0]
+        assert not (tmp_path / "o").exists()
 
 
 # ----------------------------------------------------------------------------- the real thing
