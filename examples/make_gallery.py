@@ -29,6 +29,10 @@ PROMPTS = {
     # repair has retargeted it with the ZMP term; the 6 s clip of the same seed does not
     # (docs/retarget.md)
     "walk_forward": ("a person walks forward", [], "estimated"),
+    # the turn (4.6 s) and the kick (2.4 s) pass at their estimated lengths once the balance
+    # repair's stiffer acceleration weight keeps the stance knee from zig-zagging
+    "walk_turn_left": ("a person walks and turns left", [], "estimated"),
+    "kick": ("a person kicks with the right leg", [], "estimated"),
 }
 
 
