@@ -19,7 +19,8 @@ Each stage runs exactly as :class:`motok_robot.pipeline.Pipeline` runs it, after
 * **validate**: kinematic checks, inverse dynamics, balance and the physics rollout (no plots,
   no video; ``--outputs`` times those once, apart).
 * **balance** (``--balance``): the re-solve of the pipeline's balance repair (ZMP term at
-  ``PipelineConfig.balance_zmp_weight``, a foot planted in every frame, self-collision
+  ``PipelineConfig.balance_zmp_weight``, joint-acceleration weight at
+  ``PipelineConfig.balance_acceleration_weight``, a foot planted in every frame, self-collision
   avoidance) of the same clip, as ``run`` performs it for a clip that loses balance; its first
   run (problem compiles included) is reported apart as ``balance_setup``.  It has no target:
   clips that keep their balance never pay it.
@@ -196,7 +197,8 @@ def main() -> int:
     results["validate"]["failed_checks"] = val.report["failed_checks"]
 
     if args.balance:
-        balanced = balance_retargeter(entry, PipelineConfig.balance_zmp_weight)
+        balanced = balance_retargeter(entry, PipelineConfig.balance_zmp_weight,
+                                      PipelineConfig.balance_acceleration_weight)
         t = time.perf_counter()
         balanced.run(joints, fps, progress=False)
         results["balance_setup"] = {"median_s": time.perf_counter() - t, "repeat": 1,
@@ -209,6 +211,8 @@ def main() -> int:
         b = box["balanced"]
         results["balance"].update(ipopt_iterations=[w.iterations for w in b.windows], converged=bool(b.success),
                                   collision_pairs=len(b.collision_pairs),
+                                  zmp_weight=PipelineConfig.balance_zmp_weight,
+                                  acceleration_weight=PipelineConfig.balance_acceleration_weight,
                                   needed_by_this_clip=bool(set(val.report["failed_checks"]) & BALANCE_CHECKS))
 
     if args.outputs:

@@ -769,7 +769,8 @@ class Pipeline:
             acceleration_weight=acceleration_weight)
 
     def _balance_retargeter(self, entry: dict):
-        """:func:`balance_retargeter` of ``entry`` at ``balance_zmp_weight``."""
+        """:func:`balance_retargeter` of ``entry`` at ``balance_zmp_weight`` and
+        ``balance_acceleration_weight``."""
         return balance_retargeter(entry, self.config.balance_zmp_weight, self.config.balance_acceleration_weight)
 
     def _rebalance(self, entry: dict, motion, robot_path: Path, first, unbalanced: set, validation,
