@@ -377,13 +377,16 @@ def check_playback(playback: str, port: str | None) -> None:
         raise InputError(f"a serial port ({port}) was given with playback {playback!r}; use playback='port'")
 
 
-def read_prompts(path) -> list[PromptSpec]:
+def read_prompts(path, seconds: float | None = None, seed: int = 0) -> list[PromptSpec]:
     """Prompts of a ``--prompts`` file.
 
     Either one prompt per line (blank lines and lines starting with ``#`` are skipped), or a CSV
-    file whose header row names the columns ``text`` and optionally ``seconds`` and ``seed``
-    (empty cells: estimated length / seed 0).  Every row is checked; errors name the line.
+    file whose header row names the columns ``text`` and optionally ``seconds`` and ``seed``.
+    A row without seconds or seed (every plain line, an empty or missing CSV cell) takes
+    ``seconds`` (None: the length estimated from the text) and ``seed``: the command line's
+    ``--seconds`` and ``--seed``.  Every row is checked; errors name the line.
     """
+    default_seconds, default_seed = seconds, seed
     path = Path(path)
     if not path.is_file():
         raise InputError(f"--prompts {path}: file not found")
@@ -411,14 +414,14 @@ def read_prompts(path) -> list[PromptSpec]:
                 raise InputError(f"{where}: {exc}") from None
             seconds = _parse_number(row.get("seconds", ""), float, f"{where}: seconds")
             seed = _parse_number(row.get("seed", ""), int, f"{where}: seed")
-            specs.append(PromptSpec(text, check_seconds(seconds, f"{where}: seconds"),
-                                    0 if seed is None else check_seed(seed, f"{where}: seed"), number))
+            specs.append(PromptSpec(text, default_seconds if seconds is None else check_seconds(seconds, f"{where}: seconds"),
+                                    default_seed if seed is None else check_seed(seed, f"{where}: seed"), number))
         if not specs:
             raise InputError(f"--prompts {path}: the CSV has a header but no rows")
     else:
         for number, ln in numbered:
             try:
-                specs.append(PromptSpec(check_text(ln), None, 0, number))
+                specs.append(PromptSpec(check_text(ln), default_seconds, default_seed, number))
             except InputError as exc:
                 raise InputError(f"--prompts {path}: line {number}: {exc}") from None
     return specs

@@ -54,7 +54,8 @@ def register(commands, groups) -> None:
     parser.add_argument("--skeleton", default="bandai",
                         help="BVH skeleton of --motion: bandai, acrnn or a joint-map JSON (default bandai)")
     parser.add_argument("--prompts", type=Path, default=None, metavar="FILE",
-                        help="run every prompt of FILE (one per line, or CSV text,seconds,seed); writes OUT/summary.csv")
+                        help="run every prompt of FILE (one per line, or CSV text,seconds,seed; rows without seconds or "
+                             "seed take --seconds / --seed); writes OUT/summary.csv")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (new or empty)")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing, non-empty --out when done")
     parser.add_argument("--max-retime", type=float, default=PipelineConfig.max_retime, metavar="S",
@@ -113,7 +114,8 @@ def run_command(args: argparse.Namespace) -> int:
             raise InputError("constraint options apply to one prompt; they cannot be combined with --prompts")
         if args.port:
             raise InputError("--prompts cannot play on hardware; run one prompt with --port")
-        prompts = read_prompts(args.prompts)
+        # --seconds / --seed apply to the rows that give none
+        prompts = read_prompts(args.prompts, check_seconds(args.seconds, "--seconds"), check_seed(args.seed, "--seed"))
         check_robot(robot)
         check_playback(playback, None)
         check_out_dir(args.out, args.overwrite)

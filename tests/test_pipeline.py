@@ -240,6 +240,9 @@ def test_cli_invalid_input_is_one_line_before_any_work(runs, tmp_path, capsys):
         (["run", "--out", str(out)], "give a TEXT prompt"),
         (["run", "a person walks", "--prompts", str(tmp_path / "p.txt"), "--out", str(out)], "not both"),
         (["run", "--prompts", str(tmp_path / "p.txt"), "--out", str(out)], "file not found"),
+        (["run", "--prompts", str(tmp_path / "p.txt"), "--seed", "-1", "--out", str(out)],
+         "--seed must be a non-negative integer"),
+        (["run", "--prompts", str(tmp_path / "p.txt"), "--seconds", "0", "--out", str(out)], "--seconds must be positive"),
         (["run", "a person walks", "--sim-video", "--out", str(out)], "--sim-video needs --sim"),
         (["run", "a person walks", "--zmp-weight", "-1", "--out", str(out)], "--zmp-weight must be >= 0"),
         (["run", "a person walks", "--com-weight", "nan", "--out", str(out)], "--com-weight must be >= 0"),
@@ -407,13 +410,15 @@ def test_api_constraints_must_match_seconds(pipe, tmp_path):
 
 def test_prompts_file_runs_a_list_and_writes_summary_csv(runs, tmp_path, capsys):
     prompts = tmp_path / "prompts.csv"
-    prompts.write_text("text,seconds,seed\na person walks forward,1.6,0\n# a comment\n\"a person stands, still\",1.2,4\n")
+    # the first row gives no seed: it takes --seed; the second keeps its own
+    prompts.write_text("text,seconds,seed\na person walks forward,1.6,\n# a comment\n\"a person stands, still\",1.2,4\n")
     out = tmp_path / "batch"
-    code = main(["run", "--prompts", str(prompts), "--no-render", "--no-plots", "--out", str(out)] + _model_args(runs))
+    code = main(["run", "--prompts", str(prompts), "--seed", "7", "--no-render", "--no-plots", "--out", str(out)]
+                + _model_args(runs))
     with open(out / "summary.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["text"] for r in rows] == ["a person walks forward", "a person stands, still"]
-    assert [r["seed"] for r in rows] == ["0", "4"] and [float(r["seconds"]) for r in rows] == [1.6, 1.2]
+    assert [r["seed"] for r in rows] == ["7", "4"] and [float(r["seconds"]) for r in rows] == [1.6, 1.2]
     for r in rows:
         assert r["error"] == "" and (out / r["folder"] / "summary.md").is_file()
         assert float(r["generate_s"]) > 0 and float(r["retarget_s"]) > 0 and float(r["validate_s"]) > 0
@@ -458,6 +463,11 @@ def test_read_prompts_plain_and_errors(tmp_path):
     specs = read_prompts(plain)
     assert [(s.text, s.seconds, s.seed, s.line) for s in specs] == [("a person walks forward", None, 0, 2),
                                                                      ("a person bows", None, 0, 4)]
+    # the command line's --seconds / --seed fill what a row does not give
+    assert [(s.seconds, s.seed) for s in read_prompts(plain, seconds=2.5, seed=3)] == [(2.5, 3), (2.5, 3)]
+    mixed = tmp_path / "m.csv"
+    mixed.write_text("text,seconds,seed\na person walks,,\na person bows,4,1\na person waves,3,\n")
+    assert [(s.seconds, s.seed) for s in read_prompts(mixed, seconds=2.0, seed=5)] == [(2.0, 5), (4.0, 1), (3.0, 5)]
     bad = tmp_path / "bad.csv"
     bad.write_text("text,seconds,seed\na person walks,-2,0\n")
     with pytest.raises(InputError, match=r"line 2: seconds must be positive"):
