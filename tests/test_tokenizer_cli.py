@@ -81,6 +81,34 @@ def test_train_resume_and_reconstruct(tmp_path, capsys):
     assert "mpjpe_cm" in capsys.readouterr().out
 
 
+def test_decoder_stage_recipe_keeps_the_tokens(tmp_path):
+    """The optional second stage of models/train_default_models.sh (TOKENIZER_STAGE2=1):
+    --init-from RUN --freeze-tokens --config models/tokenizer_finetune.json trains the decoder
+    side with the recipe's settings and leaves the tokens (and so the planners) as they were."""
+    from pathlib import Path
+
+    from motok_robot.tokenizer.checkpoint import load_tokenizer
+
+    torch.set_num_threads(1)
+    recipe = Path(__file__).resolve().parents[1] / "models" / "tokenizer_finetune.json"
+    data = write_prepared(tmp_path / "prepared")
+    config = tmp_path / "tiny.json"
+    config.write_text(json.dumps({"tokenizer": TINY, "train": {"window": 48, "batch_size": 2, "warmup_steps": 1,
+                                                                "val_clips": 1, "val_sample_steps": 2}}))
+    base, stage2 = tmp_path / "base", tmp_path / "stage2"
+    assert main(["train", "tokenizer", "--data", str(data), "--out", str(base), "--config", str(config), "--steps", "3"]) == 0
+    assert main(["train", "tokenizer", "--data", str(data), "--out", str(stage2), "--init-from", str(base), "--freeze-tokens",
+                 "--config", str(recipe), "--steps", "3", "--batch-size", "2", "--device", "cpu"]) == 0
+    train = json.loads((stage2 / "config.json").read_text())["train"]
+    wanted = json.loads(recipe.read_text())["train"]
+    assert train["freeze_tokens"] and train["init_from"] == str(base)
+    assert train["lr"] == wanted["lr"] and train["steps_per_epoch"] == wanted["steps_per_epoch"]
+    a, b = load_tokenizer(base, device="cpu"), load_tokenizer(stage2, device="cpu")
+    assert a.tokens_digest() == b.tokens_digest()
+    changed = [k for k, v in a.state_dict().items() if not torch.equal(v, b.state_dict()[k])]
+    assert changed and all(k.startswith(("cond_decoder.", "denoiser.")) for k in changed), changed
+
+
 def test_cli_errors_are_one_line(tmp_path, capsys):
     data = write_prepared(tmp_path / "prepared", {"train": 1, "val": 0, "test": 1})
     assert main(["eval", "reconstruct", "--data", str(data), "--tokenizer", str(tmp_path / "none")]) == 2
