@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -85,8 +86,6 @@ def test_decoder_stage_recipe_keeps_the_tokens(tmp_path):
     """The optional second stage of models/train_default_models.sh (TOKENIZER_STAGE2=1):
     --init-from RUN --freeze-tokens --config models/tokenizer_finetune.json trains the decoder
     side with the recipe's settings and leaves the tokens (and so the planners) as they were."""
-    from pathlib import Path
-
     from motok_robot.tokenizer.checkpoint import load_tokenizer
 
     torch.set_num_threads(1)
