@@ -386,7 +386,6 @@ def read_prompts(path, seconds: float | None = None, seed: int = 0) -> list[Prom
     ``seconds`` (None: the length estimated from the text) and ``seed``: the command line's
     ``--seconds`` and ``--seed``.  Every row is checked; errors name the line.
     """
-    default_seconds, default_seed = seconds, seed
     path = Path(path)
     if not path.is_file():
         raise InputError(f"--prompts {path}: file not found")
@@ -412,16 +411,16 @@ def read_prompts(path, seconds: float | None = None, seed: int = 0) -> list[Prom
                 text = check_text(row.get("text", ""))
             except InputError as exc:
                 raise InputError(f"{where}: {exc}") from None
-            seconds = _parse_number(row.get("seconds", ""), float, f"{where}: seconds")
-            seed = _parse_number(row.get("seed", ""), int, f"{where}: seed")
-            specs.append(PromptSpec(text, default_seconds if seconds is None else check_seconds(seconds, f"{where}: seconds"),
-                                    default_seed if seed is None else check_seed(seed, f"{where}: seed"), number))
+            row_seconds = _parse_number(row.get("seconds", ""), float, f"{where}: seconds")
+            row_seed = _parse_number(row.get("seed", ""), int, f"{where}: seed")
+            specs.append(PromptSpec(text, seconds if row_seconds is None else check_seconds(row_seconds, f"{where}: seconds"),
+                                    seed if row_seed is None else check_seed(row_seed, f"{where}: seed"), number))
         if not specs:
             raise InputError(f"--prompts {path}: the CSV has a header but no rows")
     else:
         for number, ln in numbered:
             try:
-                specs.append(PromptSpec(check_text(ln), default_seconds, default_seed, number))
+                specs.append(PromptSpec(check_text(ln), seconds, seed, number))
             except InputError as exc:
                 raise InputError(f"--prompts {path}: line {number}: {exc}") from None
     return specs

@@ -107,6 +107,7 @@ def run_command(args: argparse.Namespace) -> int:
     if args.force and not args.port:
         raise InputError("--force only applies to hardware playback (--port DEV)")
     control = _has_control(args)
+    seconds, seed = check_seconds(args.seconds, "--seconds"), check_seed(args.seed, "--seed")
     if args.prompts is not None:
         if args.text is not None:
             raise InputError("give either TEXT or --prompts FILE, not both")
@@ -114,8 +115,7 @@ def run_command(args: argparse.Namespace) -> int:
             raise InputError("constraint options apply to one prompt; they cannot be combined with --prompts")
         if args.port:
             raise InputError("--prompts cannot play on hardware; run one prompt with --port")
-        # --seconds / --seed apply to the rows that give none
-        prompts = read_prompts(args.prompts, check_seconds(args.seconds, "--seconds"), check_seed(args.seed, "--seed"))
+        prompts = read_prompts(args.prompts, seconds, seed)  # --seconds / --seed: for rows that give none
         check_robot(robot)
         check_playback(playback, None)
         check_out_dir(args.out, args.overwrite)
@@ -127,8 +127,6 @@ def run_command(args: argparse.Namespace) -> int:
             raise InputError("constraint options apply to generation; they cannot be combined with --motion")
         if args.text is not None:
             check_text(args.text)
-        check_seconds(args.seconds, "--seconds")
-        check_seed(args.seed, "--seed")
         check_robot(robot)
         check_playback(playback, args.port)
         check_out_dir(args.out, args.overwrite)
@@ -143,14 +141,13 @@ def run_command(args: argparse.Namespace) -> int:
         return _run_batch(pipe, prompts, args, robot, playback)
 
     constraints = control_config = None
-    seconds = args.seconds
     if control:
         from motok_robot.control.options import constraints_from_args, control_config_from_args
 
         seconds = seconds or DEFAULT_CONSTRAINED_SECONDS
         constraints = constraints_from_args(args, round(seconds * 20))
         control_config = control_config_from_args(args)
-    result = pipe.run(args.text, robot=robot, seconds=seconds, seed=args.seed, constraints=constraints,
+    result = pipe.run(args.text, robot=robot, seconds=seconds, seed=seed, constraints=constraints,
                       out_dir=args.out, playback=playback, port=args.port, force=args.force,
                       render=not args.no_render, control=control_config,
                       control_path=getattr(args, "control_path", "both"), overwrite=args.overwrite, progress=None,
