@@ -5,45 +5,43 @@
 * :mod:`~motok_robot.servo.sim_rig`: the MuJoCo model as a servo bus.
 * :mod:`~motok_robot.servo.convert`: radians <-> ticks and the per-tick safety limiter.
 * :mod:`~motok_robot.servo.streamer`: report gate, pre-flight, fixed-rate streaming, safe stop.
+
+The names below load on first use, so ``motok-robot`` commands that never touch a servo (training
+and evaluation on a GPU box, say) do not need ``dynamixel_sdk`` installed.
 """
 
-from motok_robot.servo.bus import (
-    DynamixelBus,
-    ServoAlertError,
-    ServoBus,
-    ServoCommError,
-    ServoError,
-    ServoRejectedError,
-)
-from motok_robot.servo.config import PlaybackConfig
-from motok_robot.servo.convert import ServoMap, limit_command
-from motok_robot.servo.streamer import (
-    PlaybackInterrupted,
-    PlaybackResult,
-    PlaybackWarning,
-    Streamer,
-    Trajectory,
-    check_validation_report,
-    load_trajectory,
-    play_file,
-)
+import importlib
 
-__all__ = [
-    "DynamixelBus",
-    "PlaybackConfig",
-    "PlaybackInterrupted",
-    "PlaybackResult",
-    "PlaybackWarning",
-    "ServoAlertError",
-    "ServoBus",
-    "ServoCommError",
-    "ServoError",
-    "ServoMap",
-    "ServoRejectedError",
-    "Streamer",
-    "Trajectory",
-    "check_validation_report",
-    "limit_command",
-    "load_trajectory",
-    "play_file",
-]
+_WHERE = {
+    "DynamixelBus": "bus",
+    "ServoAlertError": "bus",
+    "ServoBus": "bus",
+    "ServoCommError": "bus",
+    "ServoError": "bus",
+    "ServoRejectedError": "bus",
+    "PlaybackConfig": "config",
+    "ServoMap": "convert",
+    "limit_command": "convert",
+    "PlaybackInterrupted": "streamer",
+    "PlaybackResult": "streamer",
+    "PlaybackWarning": "streamer",
+    "Streamer": "streamer",
+    "Trajectory": "streamer",
+    "check_validation_report": "streamer",
+    "load_trajectory": "streamer",
+    "play_file": "streamer",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"motok_robot.servo.{_WHERE[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))
