@@ -293,3 +293,45 @@ def test_cmu_trial_and_its_deepmimic_conversion_share_a_split(tmp_path):
         assert any("walks" in s for s in b["texts"])  # DeepMimic's CMU clips get the CMU description
         splits.add(a["split"])
     assert len(splits) > 1
+
+
+def test_split_by_clip_spreads_takes_and_keeps_mirrors_with_their_original(tmp_path, capsys):
+    data = tmp_path / "bandai" / "Bandai-Namco-Research-Motiondataset-1" / "data"
+    data.mkdir(parents=True)
+    stems = [f"dataset-1_walk_happy_{k:03d}" for k in range(1, 9)]
+    for k, stem in enumerate(stems):
+        bvh = canonical_bvh_text(frames=24 + 3 * k, speed=1 + 0.1 * k, names=BANDAI_NAMES | {"spine3": "unused"},
+                                 skip=("spine3",))
+        (data / f"{stem}.bvh").write_text(bvh)
+    ids = [f"bandai/{s}" for s in stems]
+    # a salt under which a per-clip hash puts the eight takes into more than one split
+    seed = next(s for s in range(100) if len({split_of(i, s) for i in ids}) > 1)
+
+    by_clip, by_group = tmp_path / "by_clip", tmp_path / "by_group"
+    for out, unit in ((by_clip, "clip"), (by_group, "group")):
+        assert _run("--source", f"bandai={tmp_path / 'bandai'}", "--out", str(out), "--workers", "1",
+                    "--seed", str(seed), "--split-by", unit) == 0
+    assert "splits (by clip)" in capsys.readouterr().out
+    clip_rec = {r["id"]: r for r in map(json.loads, (by_clip / "index.jsonl").read_text().splitlines())}
+    group_rec = {r["id"]: r for r in map(json.loads, (by_group / "index.jsonl").read_text().splitlines())}
+    assert len(clip_rec) == len(group_rec) == 16  # eight takes and their mirrors
+    assert len({group_rec[i]["split"] for i in ids}) == 1  # one content+style group: one split
+    assert len({clip_rec[i]["split"] for i in ids}) > 1
+    for i in ids:
+        assert clip_rec[i]["split"] == split_of(i, seed)
+        assert clip_rec[f"mirror/{i}"]["split"] == clip_rec[i]["split"]
+    assert json.loads((by_clip / "summary.json").read_text())["command"]["split_by"] == "clip"
+    # mean/std follow the split: over the train clips of this split only
+    train = PreparedDataset(by_clip, "train")
+    if train.clip_ids:
+        feats = np.concatenate([train.features(c) for c in train.clip_ids]).astype(np.float64)
+        np.testing.assert_allclose(np.load(by_clip / "mean.npy"), feats.mean(0), atol=1e-4)
+
+    with pytest.raises(SystemExit):
+        _run("--source", f"bandai={tmp_path / 'bandai'}", "--out", str(tmp_path / "x"), "--split-by", "take")
+    assert "invalid choice: 'take'" in capsys.readouterr().err
+    from motok_robot.data.prepare import PrepareConfig, prepare
+
+    with pytest.raises(InputError, match="split_by 'take'"):
+        prepare(PrepareConfig(sources=[("bandai", str(tmp_path / "bandai"))], out=str(tmp_path / "y"), split_by="take"))
+    assert not (tmp_path / "y").exists()

@@ -38,6 +38,9 @@ def register(commands, groups) -> None:
                    help="joint-map JSON for 'bvh' (required) and 'asf' sources; KIND=FILE targets one kind")
     p.add_argument("--no-mirror", dest="mirror", action="store_false", help="do not add left/right mirrored clips")
     p.add_argument("--seed", type=int, default=0, help="salt of the hash-based split (default 0)")
+    p.add_argument("--split-by", choices=("group", "clip"), default="group",
+                   help="what the split holds out: whole Bandai content+style groups (default) or single clips "
+                        "(HumanML3D-style; a mirror stays with its original)")
     p.add_argument("--limit", type=int, default=None, help="at most N files per source (for quick tries)")
     p.add_argument("--workers", type=int, default=2, help="worker processes (default 2; 1 = in-process)")
     p.add_argument("--asf-fps", type=float, default=120.0, help="frame rate of 'asf' AMC files (default 120)")
@@ -73,7 +76,7 @@ def _prepare(args: argparse.Namespace) -> int:
             raise InputError("give one --map FILE, or several --map KIND=FILE")
     cfg = PrepareConfig(
         sources=list(args.source), out=args.out, texts=args.texts, joint_map=joint_map, mirror=args.mirror,
-        seed=args.seed, limit=args.limit, workers=args.workers, asf_fps=args.asf_fps, overwrite=args.overwrite,
+        seed=args.seed, split_by=args.split_by, limit=args.limit, workers=args.workers, asf_fps=args.asf_fps, overwrite=args.overwrite,
     )
     summary = prepare(cfg)
     print(format_summary(summary))

@@ -14,7 +14,9 @@ Output layout (docs/CONTRACTS.md, "Prepared dataset")::
 ``NAME`` is the clip id with ``/`` replaced by ``__``.  Mirrored clips (left/right swapped,
 texts with left/right words swapped) get the id ``mirror/<id>`` and the split of their
 original.  The split is a hash of the clip's group (a Bandai content+style, otherwise the
-clip itself) and the seed: ~85 % train, 5 % val, 10 % test.
+clip itself) and the seed: ~85 % train, 5 % val, 10 % test.  ``split_by="clip"`` hashes each
+clip on its own instead (HumanML3D's kind of split: other takes of a test clip's content and
+style can be in train); a mirror still goes where its original goes.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from motok_robot.data.texts import mirror_text
 from motok_robot.errors import InputError
 
 SPLIT_FRACTIONS = {"train": 0.85, "val": 0.05, "test": 0.10}
+SPLIT_UNITS = ("group", "clip")  # what the split hashes: a clip's group, or the clip itself
 STD_FLOOR = 1e-4
 MIN_FRAMES = 4  # shorter clips (at 20 fps) are skipped: too short to learn from
 
@@ -52,6 +55,7 @@ class PrepareConfig:
     joint_map: str | dict[str, str] | None = None  # joint-map JSON: one path (bvh and asf) or {kind: path}
     mirror: bool = True
     seed: int = 0
+    split_by: str = "group"  # one of SPLIT_UNITS
     limit: int | None = None  # at most this many files per source
     workers: int = 2
     asf_fps: float = 120.0
@@ -72,6 +76,13 @@ def split_of(group: str, seed: int = 0) -> str:
     if h < SPLIT_FRACTIONS["train"] + SPLIT_FRACTIONS["val"]:
         return "val"
     return "test"
+
+
+def split_key(record: dict, split_by: str) -> str:
+    """What decides a clip's split: its group, or the clip (a mirror: its original)."""
+    if split_by == "group":
+        return record["group"]
+    return record["mirror_of"] or record["id"]
 
 
 # ----------------------------------------------------------------------------- worker
@@ -154,6 +165,8 @@ def prepare(cfg: PrepareConfig) -> dict:
     t0 = time.time()
     if not cfg.sources:
         raise InputError("no --source given (use --source KIND=PATH)")
+    if cfg.split_by not in SPLIT_UNITS:
+        raise InputError(f"split_by {cfg.split_by!r}: use one of {', '.join(SPLIT_UNITS)}")
     out = Path(cfg.out)
     _prepare_out_dir(out, cfg.overwrite)
     options_base = S.SourceOptions(asf_fps=cfg.asf_fps)
@@ -215,7 +228,7 @@ def prepare(cfg: PrepareConfig) -> dict:
         for r in result:
             if r["id"] in dropped or (r["id"].startswith("mirror/") and r["mirror_of"] in dropped):
                 continue
-            split = r["given_split"] or split_of(r["group"], cfg.seed)
+            split = r["given_split"] or split_of(split_key(r, cfg.split_by), cfg.seed)
             r["split"] = split
             name = file_name(r["id"])
             feats = r.pop("_features")
@@ -351,7 +364,7 @@ def prepare(cfg: PrepareConfig) -> dict:
         "warnings": warnings,
         "wall_time_s": round(wall, 2),
         "command": {"sources": [f"{k}={p}" for k, p in cfg.sources], "mirror": cfg.mirror, "seed": cfg.seed,
-                    "limit": cfg.limit, "texts": cfg.texts, "map": cfg.joint_map},
+                    "split_by": cfg.split_by, "limit": cfg.limit, "texts": cfg.texts, "map": cfg.joint_map},
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
@@ -384,7 +397,8 @@ def format_summary(summary: dict) -> str:
         f"{'total':<11} {summary['total_clips']:>7} {summary['total_clips_with_mirrors'] - summary['total_clips']:>8} "
         f"{summary['total_hours']:>8.3f} {len(summary['skipped']):>8} {len(summary['duplicates']):>6}"
     )
-    lines.append(f"splits: {summary['splits']}  wall time: {summary['wall_time_s']:.1f} s  -> {summary['out']}")
+    by = summary.get("command", {}).get("split_by", "group")
+    lines.append(f"splits (by {by}): {summary['splits']}  wall time: {summary['wall_time_s']:.1f} s  -> {summary['out']}")
     if summary["skipped"]:
         lines.append(f"skipped {len(summary['skipped'])} file(s):")
         lines += [f"  {s['file']}: {s['reason']}" for s in summary["skipped"]]
