@@ -74,3 +74,15 @@ def test_evaluator_resume_continues_exactly(tmp_path):
     a, b = load_evaluator(straight), load_evaluator(resumed)
     for (name, pa), (_, pb) in zip(a.state_dict().items(), b.state_dict().items()):
         torch.testing.assert_close(pa, pb, msg=name)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_evaluator_trains_and_validates_on_cuda(tmp_path):
+    """Validation batches follow the model to the GPU (they were built on the CPU and crashed)."""
+    train, val = ToyDataset(48, 0), ToyDataset(32, 1)
+    run = train_evaluator(train, val, one_hot_text, 8, tmp_path / "run", small_config(20), device="cuda")
+    rows = (run / "metrics.csv").read_text().strip().splitlines()
+    assert [r.split(",")[0] for r in rows[1:]] == ["10", "20"], rows
+    assert all(0.0 <= float(r.split(",")[2]) <= 1.0 for r in rows[1:]), rows
+    model = load_evaluator(run)  # saved weights load on the CPU
+    assert model.mean.device.type == "cpu"

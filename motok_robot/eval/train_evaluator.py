@@ -89,13 +89,14 @@ def corrupted_copies(feats: torch.Tensor, lengths: torch.Tensor, count: int, rng
 @torch.no_grad()
 def validation_r_precision(model: TextMotionEvaluator, clips: CaptionedClips, cfg: EvaluatorConfig) -> np.ndarray:
     model.eval()
+    device = model.mean.device
     rng = np.random.default_rng(0)
     order = rng.permutation(len(clips))
     text_z, motion_z = [], []
     for start in range(0, len(order), cfg.batch_size):
         feats, lengths, caption_vecs, _ = clips.batch(order[start : start + cfg.batch_size], rng, cfg, fixed=True)
-        motion_z.append(model.embed_motion(feats, lengths).numpy())
-        text_z.append(model.embed_text(caption_vecs).numpy())
+        motion_z.append(model.embed_motion(feats.to(device), lengths.to(device)).cpu().numpy())
+        text_z.append(model.embed_text(caption_vecs.to(device)).cpu().numpy())
     model.train()
     text_all, motion_all = np.concatenate(text_z), np.concatenate(motion_z)
     if len(text_all) < metrics.R_PRECISION_BATCH:
