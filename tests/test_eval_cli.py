@@ -4,6 +4,7 @@ files written here (a fake 16-d text encoder stands in for MiniLM), plus their e
 from __future__ import annotations
 
 import json
+import shutil
 import zlib
 
 import numpy as np
@@ -125,6 +126,17 @@ def test_eval_evaluator_reports_sanity(env, tmp_path, capsys):
     assert len(rows["real (test)"]["fid"]["values"]) == 3
     assert set(result["sanity"]["checks"]) >= {"shuffled_near_chance", "same_seed_identical", "other_seed_within_ci"}
     assert result["sanity"]["checks"]["same_seed_identical"]["passed"]
+    # no summary.json: a dataset from before --split-by, i.e. split by group; the hint comes with a failed FID check
+    assert result["split_by"] == "group"
+    hint = "holds out whole content+style groups"
+    assert (hint in text) == (not result["sanity"]["checks"]["fid_test_vs_train_small"]["passed"])
+
+    clip_split = tmp_path / "data"
+    shutil.copytree(env / "data", clip_split)
+    (clip_split / "summary.json").write_text(json.dumps({"command": {"split_by": "clip"}}))
+    assert main(["eval", "evaluator", "--data", str(clip_split), "--repeats", "2", "--json", str(out)]) == 0
+    assert hint not in capsys.readouterr().out
+    assert json.loads(out.read_text())["split_by"] == "clip"
 
 
 def test_eval_generation_prints_the_table_for_both_planners(env, tmp_path, capsys):
