@@ -99,8 +99,15 @@ def test_cli_reports_user_errors_in_one_line(capsys):
     assert err == ["motok-robot: error: clip.bvh: frame 3, joint 'Hips': NaN value"]
 
 
+def _run_python(code: str) -> subprocess.CompletedProcess:
+    """Run ``code`` in a fresh interpreter (nothing imported yet) and require exit status 0."""
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    return result
+
+
 def test_robot_side_modules_import_without_torch():
-    code = (
+    _run_python(
         "import sys, importlib\n"
         "mods = ['motok_robot', 'motok_robot.cli', 'motok_robot.motion', 'motok_robot.robots',"
         " 'motok_robot.sim', 'motok_robot.servo', 'motok_robot.data', 'retarget']\n"
@@ -110,13 +117,11 @@ def test_robot_side_modules_import_without_torch():
         "build_parser()\n"
         "assert 'torch' not in sys.modules, 'torch was imported'\n"
     )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-    assert result.returncode == 0, result.stderr
 
 
-def test_cli_runs_non_servo_commands_without_dynamixel_sdk(tmp_path):
+def test_cli_runs_non_servo_commands_without_dynamixel_sdk():
     """A training or evaluation box may lack dynamixel_sdk: only the servo commands need it."""
-    code = (
+    result = _run_python(
         "import sys\n"
         "sys.modules['dynamixel_sdk'] = None  # as if not installed: importing it raises ImportError\n"
         "from motok_robot.cli import main\n"
@@ -126,6 +131,4 @@ def test_cli_runs_non_servo_commands_without_dynamixel_sdk(tmp_path):
         "except ImportError:\n"
         "    print('servo needs dynamixel_sdk')\n"
     )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-    assert result.returncode == 0, result.stderr
     assert "servo needs dynamixel_sdk" in result.stdout
