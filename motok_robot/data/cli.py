@@ -76,7 +76,8 @@ def _prepare(args: argparse.Namespace) -> int:
             raise InputError("give one --map FILE, or several --map KIND=FILE")
     cfg = PrepareConfig(
         sources=list(args.source), out=args.out, texts=args.texts, joint_map=joint_map, mirror=args.mirror,
-        seed=args.seed, split_by=args.split_by, limit=args.limit, workers=args.workers, asf_fps=args.asf_fps, overwrite=args.overwrite,
+        seed=args.seed, split_by=args.split_by, limit=args.limit, workers=args.workers, asf_fps=args.asf_fps,
+        overwrite=args.overwrite,
     )
     summary = prepare(cfg)
     print(format_summary(summary))
