@@ -30,6 +30,12 @@ if [ ! -f "$PREPARED/index.jsonl" ]; then
     --source deepmimic="$DATA/deepmimic.tar.xz" \
     --split-by "${SPLIT_BY:-group}" --out "$PREPARED"
 fi
+SPLIT_HAVE=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1])).get("command", {}).get("split_by", "group"))' \
+  "$PREPARED/summary.json")
+if [ "$SPLIT_HAVE" != "${SPLIT_BY:-group}" ]; then
+  echo "error: $PREPARED is split by $SPLIT_HAVE, not ${SPLIT_BY:-group}; use another WORK_DIR" >&2
+  exit 2
+fi
 if [ ! -f "$UNSEEN/index.jsonl" ] && [ -f "$DATA/acrnn-bvh.tar.xz" ]; then
   motok-robot data prepare --source acrnn="$DATA/acrnn-bvh.tar.xz" --out "$UNSEEN"
 fi
