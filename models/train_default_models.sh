@@ -30,7 +30,7 @@ if [ ! -f "$PREPARED/index.jsonl" ]; then
     --source deepmimic="$DATA/deepmimic.tar.xz" \
     --split-by "${SPLIT_BY:-group}" --out "$PREPARED"
 fi
-SPLIT_HAVE=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1])).get("command", {}).get("split_by", "group"))' \
+SPLIT_HAVE=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1])).get("split_by", "group"))' \
   "$PREPARED/summary.json")
 if [ "$SPLIT_HAVE" != "${SPLIT_BY:-group}" ]; then
   echo "error: $PREPARED is split by $SPLIT_HAVE, not ${SPLIT_BY:-group}; use another WORK_DIR" >&2

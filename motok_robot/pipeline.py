@@ -413,8 +413,12 @@ def read_prompts(path, seconds: float | None = None, seed: int = 0) -> list[Prom
                 raise InputError(f"{where}: {exc}") from None
             row_seconds = _parse_number(row.get("seconds", ""), float, f"{where}: seconds")
             row_seed = _parse_number(row.get("seed", ""), int, f"{where}: seed")
-            specs.append(PromptSpec(text, seconds if row_seconds is None else check_seconds(row_seconds, f"{where}: seconds"),
-                                    seed if row_seed is None else check_seed(row_seed, f"{where}: seed"), number))
+            if row_seconds is not None:
+                row_seconds = check_seconds(row_seconds, f"{where}: seconds")
+            if row_seed is not None:
+                row_seed = check_seed(row_seed, f"{where}: seed")
+            specs.append(PromptSpec(text, seconds if row_seconds is None else row_seconds,
+                                    seed if row_seed is None else row_seed, number))
         if not specs:
             raise InputError(f"--prompts {path}: the CSV has a header but no rows")
     else:

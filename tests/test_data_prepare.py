@@ -187,6 +187,7 @@ def test_prepare_humanml3d_keeps_features_splits_and_stats(tmp_path):
     ds = PreparedDataset(out, "all")
     assert "humanml3d/M000001" in ds and "mirror/humanml3d/000001" not in ds
     assert ds.record("humanml3d/000002")["split"] == "test"
+    assert ds.summary()["split_by"] == "given"  # HumanML3D's own split, whatever --split-by says
     assert ds.record("humanml3d/M000001")["mirror_of"] == "humanml3d/000001"
     np.testing.assert_array_equal(ds.features("humanml3d/000001"), np.load(root / "new_joint_vecs" / "000001.npy"))
     np.testing.assert_array_equal(ds.std, np.ones(263, np.float32))  # HumanML3D's own Std.npy
@@ -320,7 +321,8 @@ def test_split_by_clip_spreads_takes_and_keeps_mirrors_with_their_original(tmp_p
     for i in ids:
         assert clip_rec[i]["split"] == split_of(i, seed)
         assert clip_rec[f"mirror/{i}"]["split"] == clip_rec[i]["split"]
-    assert json.loads((by_clip / "summary.json").read_text())["command"]["split_by"] == "clip"
+    summary = json.loads((by_clip / "summary.json").read_text())
+    assert summary["command"]["split_by"] == "clip" and summary["split_by"] == "clip"
     # mean/std follow the split: over the train clips of this split only
     train = PreparedDataset(by_clip, "train")
     if train.clip_ids:

@@ -133,7 +133,7 @@ def test_eval_evaluator_reports_sanity(env, tmp_path, capsys):
 
     clip_split = tmp_path / "data"
     shutil.copytree(env / "data", clip_split)
-    (clip_split / "summary.json").write_text(json.dumps({"command": {"split_by": "clip"}}))
+    (clip_split / "summary.json").write_text(json.dumps({"split_by": "clip"}))
     assert main(["eval", "evaluator", "--data", str(clip_split), "--repeats", "2", "--json", str(out)]) == 0
     assert hint not in capsys.readouterr().out
     assert json.loads(out.read_text())["split_by"] == "clip"

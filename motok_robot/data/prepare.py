@@ -358,6 +358,8 @@ def prepare(cfg: PrepareConfig) -> dict:
         "total_clips_with_mirrors": total + sum(s.mirrors for s in stats.values()),
         "total_hours": round(sum(s.frames for s in stats.values()) / 20.0 / 3600.0, 4),
         "splits": {k: len(v) for k, v in splits.items()},
+        # the unit the split actually held out: HumanML3D brings its own split
+        "split_by": "given" if all_humanml else cfg.split_by,
         "mean_std_from": stats_from,
         "skipped": skipped,
         "duplicates": duplicates,
@@ -397,7 +399,7 @@ def format_summary(summary: dict) -> str:
         f"{'total':<11} {summary['total_clips']:>7} {summary['total_clips_with_mirrors'] - summary['total_clips']:>8} "
         f"{summary['total_hours']:>8.3f} {len(summary['skipped']):>8} {len(summary['duplicates']):>6}"
     )
-    by = summary.get("command", {}).get("split_by", "group")
+    by = summary.get("split_by", "group")
     lines.append(f"splits (by {by}): {summary['splits']}  wall time: {summary['wall_time_s']:.1f} s  -> {summary['out']}")
     if summary["skipped"]:
         lines.append(f"skipped {len(summary['skipped'])} file(s):")

@@ -301,7 +301,7 @@ def _eval_evaluator(args: argparse.Namespace) -> int:
     test_set = _load_split(args.data, "test")
     test = clips_from_dataset(test_set, embedder.min_frames, cfg.max_clips)
     # datasets prepared before --split-by existed were split by group
-    split_by = test_set.summary().get("command", {}).get("split_by", "group")
+    split_by = test_set.summary().get("split_by", "group")
     reference = floor = matched = None
     if not args.no_train_reference:  # two disjoint train samples as large as the test set
         train = _load_split(args.data, "train")
