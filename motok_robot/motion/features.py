@@ -233,7 +233,7 @@ def _fill_from_nearest(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return values[choose]
 
 
-def _planar_facing_zup(j: np.ndarray) -> np.ndarray:
+def planar_facing_yaw(j: np.ndarray) -> np.ndarray:
     """Yaw (rad, about +z, 0 = facing +x) of ``j[T, 22, 3]`` (z-up) from hips and shoulders,
     un-swapped across vector; degenerate frames take the nearest valid frame (else 0)."""
     across = (j[:, _R_HIP] - j[:, _L_HIP]) + (j[:, _R_SHOULDER] - j[:, _L_SHOULDER])
@@ -306,7 +306,7 @@ def normalise_joints(joints, fps: float = skeleton.FPS) -> np.ndarray:
     valid = lengths > _MIN_BONE
     unit = bones / np.maximum(lengths, _MIN_BONE)[..., None]
     if not valid.all():
-        yaw = _planar_facing_zup(j)
+        yaw = planar_facing_yaw(j)
         for b in np.flatnonzero(~valid.all(axis=0)):
             if valid[:, b].any():
                 unit[:, b] = _fill_from_nearest(unit[:, b], valid[:, b])
@@ -328,7 +328,7 @@ def normalise_joints(joints, fps: float = skeleton.FPS) -> np.ndarray:
 
     out[..., 2] -= out[..., 2].min()
     out[..., :2] -= out[0, 0, :2]
-    yaw0 = _planar_facing_zup(out[:1])[0]
+    yaw0 = planar_facing_yaw(out[:1])[0]
     rot = rotation_about_axis(-yaw0, 2)
     return out @ rot.T
 

@@ -1,0 +1,123 @@
+"""Behaviour pass rates of the planners over many seeds (the tests check seed 0 only).
+
+Run: python benchmarks/planner_behaviour.py [--planner masked ar] [--seeds 12] [--seconds S|auto]
+       [--cfg S] [--models DIR] [--data runs/prepared] [--threads 2]
+       [--out benchmarks/results/planner_behaviour.json]
+
+For every planner and seed ``0..N-1`` it generates the five prompts of
+:mod:`motok_robot.eval.behaviour` and runs its six checks (walk, a planted foot, run faster than
+walk, wave the right hand, raise both hands, bow and come back up), with the default sampling
+settings unless ``--cfg`` is given, at the checks' lengths (6 s for the walk, run and wave; the
+planner's own length, from its length estimator or the AR end token, for raising both hands and
+bowing); ``--seconds`` sets one length for all (a number, or ``auto`` for the planner's own). With ``--data`` (a prepared
+dataset) the bow and raise-both-hands checks also run on the real Bandai Namco clips of those
+labels, at their own lengths, as the reference. Prints a table of passes per check and writes
+JSON with every seed's measured values and the machine description.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import print_table, write_json  # noqa: E402
+
+from motok_robot.eval import behaviour as B  # noqa: E402
+
+#: real-clip reference: label -> the check that applies to one clip of it
+REFERENCE = {"bow": B.check_bow, "raise-up-both-hands": B.check_raise_both_hands}
+
+
+def planner_rows(planners: list[str], seeds: int, th: B.BehaviourThresholds, cfg: float | None) -> list[dict]:
+    from motok_robot.planner.generate import MotionGenerator
+
+    rows = []
+    for kind in planners:
+        gen = MotionGenerator(kind)
+        per_seed = []
+        for seed in range(seeds):
+            def make(text: str, seconds: float | None) -> np.ndarray:
+                return gen.generate(text, seconds=seconds, seed=seed, cfg_scale=cfg).joints.astype(np.float64)
+
+            results = B.check_all(make, th=th)
+            per_seed.append({"seed": seed, **{name: r.to_dict() for name, r in results.items()}})
+            print(f"  {kind} seed {seed}: " + ", ".join(f"{n} {'ok' if r.passed else 'MISS'}" for n, r in results.items()),
+                  flush=True)
+        row = {"rows": f"{kind} planner", "model": gen.model_id, "seeds": per_seed}
+        for name in B.CHECKS:
+            passed = [s["seed"] for s in per_seed if s[name]["passed"]]
+            row[name] = f"{len(passed)}/{seeds}"
+            row[f"{name}_seeds"] = passed
+        rows.append(row)
+    return rows
+
+
+def reference_rows(data: Path) -> list[dict]:
+    """The bow and raise-both-hands checks on the real Bandai clips of those labels (originals)."""
+    from motok_robot.data.dataset import PreparedDataset
+    from motok_robot.planner.data import clip_action
+
+    dataset = PreparedDataset(data, "all")
+    outcomes: dict[str, list[bool]] = {label: [] for label in REFERENCE}
+    for clip_id in dataset.clip_ids:
+        record = dataset.record(clip_id)
+        label = clip_action(record) if record["source"] == "bandai" and not record.get("mirror_of") else None
+        if label in REFERENCE:
+            joints = np.asarray(dataset.joints(clip_id), dtype=np.float64)
+            outcomes[label].append(REFERENCE[label](joints).passed)
+    row = {"rows": "real Bandai clips (own length)", "model": str(data)}
+    for label, name in (("bow", "bow"), ("raise-up-both-hands", "raise_both_hands")):
+        row[name] = f"{sum(outcomes[label])}/{len(outcomes[label])}" if outcomes[label] else "-"
+    return [row]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--planner", nargs="+", choices=("masked", "ar"), default=["masked", "ar"])
+    parser.add_argument("--seeds", type=int, default=12)
+    parser.add_argument("--seconds", default=None,
+                        help="one length for every motion, seconds or 'auto' (default: the checks' own lengths)")
+    parser.add_argument("--cfg", type=float, default=None, help="guidance scale (default: the sampling default)")
+    parser.add_argument("--data", type=Path, default=None, help="prepared dataset for the real-clip reference row")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/planner_behaviour.json"))
+    args = parser.parse_args()
+    if args.seeds < 1:
+        parser.error("--seeds must be >= 1")
+    th = B.BehaviourThresholds()
+    if args.seconds is not None:
+        try:
+            seconds = None if args.seconds == "auto" else float(args.seconds)
+        except ValueError:
+            parser.error(f"--seconds must be a number or 'auto' (got {args.seconds!r})")
+        if seconds is not None and seconds <= 0:
+            parser.error("--seconds must be > 0")
+        th = replace(th, seconds=seconds, action_seconds=seconds)
+    if args.data is not None and not (args.data / "index.jsonl").is_file():
+        parser.error(f"--data {args.data}: no index.jsonl (make one with motok-robot data prepare)")
+
+    import torch
+
+    torch.set_num_threads(args.threads)
+    rows = planner_rows(args.planner, args.seeds, th, args.cfg)
+    if args.data is not None:
+        rows += reference_rows(args.data)
+    def length(s: float | None) -> str:
+        return "own length" if s is None else f"{s:g} s"
+
+    print_table(rows, ["rows", *B.CHECKS], title=f"Behaviour checks passed, seeds 0-{args.seeds - 1}; walk, run, wave "
+                f"{length(th.seconds)}, hands and bow {length(th.action_seconds)}; guidance "
+                f"{'default' if args.cfg is None else args.cfg}")
+    path = write_json(args.out, {"benchmark": "planner_behaviour", "seeds": args.seeds, "cfg_scale": args.cfg, "thresholds": asdict(th),
+                                 "rows": rows}, threads=args.threads)
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
