@@ -1,18 +1,20 @@
 """Behaviour pass rates of the planners over many seeds (the tests check seed 0 only).
 
 Run: python benchmarks/planner_behaviour.py [--planner masked ar] [--seeds 12] [--seconds S|auto]
-       [--cfg S] [--models DIR] [--data runs/prepared] [--threads 2]
+       [--cfg S] [--data runs/prepared] [--threads 2]
        [--out benchmarks/results/planner_behaviour.json]
 
 For every planner and seed ``0..N-1`` it generates the five prompts of
 :mod:`motok_robot.eval.behaviour` and runs its six checks (walk, a planted foot, run faster than
-walk, wave the right hand, raise both hands, bow and come back up), with the default sampling
-settings unless ``--cfg`` is given, at the checks' lengths (6 s for the walk, run and wave; the
-planner's own length, from its length estimator or the AR end token, for raising both hands and
-bowing); ``--seconds`` sets one length for all (a number, or ``auto`` for the planner's own). With ``--data`` (a prepared
-dataset) the bow and raise-both-hands checks also run on the real Bandai Namco clips of those
-labels, at their own lengths, as the reference. Prints a table of passes per check and writes
-JSON with every seed's measured values and the machine description.
+walk, wave the right hand, raise both hands, bow and come back up) on the configured models
+(``models/`` or ``$MOTOK_ROBOT_MODELS``), with the default sampling settings unless ``--cfg`` is
+given, at the checks' lengths (6 s for the walk, run and wave; the planner's own length, from its
+length estimator, for raising both hands and bowing); ``--seconds`` sets one length for all (a
+number, or ``auto`` for the planner's own). With ``--data`` (a prepared dataset) the bow and
+raise-both-hands checks also run on the real Bandai Namco clips of those labels, at their own
+lengths, and on the same clips encoded and decoded by the tokenizer: what a planner could reach
+with the best token sequence. Prints a table of passes per check and writes
+JSON with every seed's measured values and motion lengths, and the machine description.
 """
 
 from __future__ import annotations
@@ -41,11 +43,15 @@ def planner_rows(planners: list[str], seeds: int, th: B.BehaviourThresholds, cfg
         gen = MotionGenerator(kind)
         per_seed = []
         for seed in range(seeds):
+            lengths: dict[str, float] = {}
+
             def make(text: str, seconds: float | None) -> np.ndarray:
-                return gen.generate(text, seconds=seconds, seed=seed, cfg_scale=cfg).joints.astype(np.float64)
+                motion = gen.generate(text, seconds=seconds, seed=seed, cfg_scale=cfg)
+                lengths[text] = motion.seconds
+                return motion.joints.astype(np.float64)
 
             results = B.check_all(make, th=th)
-            per_seed.append({"seed": seed, **{name: r.to_dict() for name, r in results.items()}})
+            per_seed.append({"seed": seed, "seconds": lengths, **{name: r.to_dict() for name, r in results.items()}})
             print(f"  {kind} seed {seed}: " + ", ".join(f"{n} {'ok' if r.passed else 'MISS'}" for n, r in results.items()),
                   flush=True)
         row = {"rows": f"{kind} planner", "model": gen.model_id, "seeds": per_seed}
@@ -57,23 +63,42 @@ def planner_rows(planners: list[str], seeds: int, th: B.BehaviourThresholds, cfg
     return rows
 
 
-def reference_rows(data: Path) -> list[dict]:
-    """The bow and raise-both-hands checks on the real Bandai clips of those labels (originals)."""
-    from motok_robot.data.dataset import PreparedDataset
-    from motok_robot.planner.data import clip_action
+def reference_rows(data: Path, tokenizer_run: Path | None = None) -> list[dict]:
+    """The bow and raise-both-hands checks on the real Bandai clips of those labels (originals, at
+    their own lengths), and on the same clips encoded and decoded by the tokenizer (what the best
+    possible token sequence gives; seed 0 of the decoder)."""
+    import torch
 
+    from motok_robot.data.dataset import PreparedDataset
+    from motok_robot.motion.features import joints_from_features
+    from motok_robot.planner.data import clip_action
+    from motok_robot.planner.generate import default_run
+    from motok_robot.tokenizer import load_tokenizer
+
+    tokenizer = load_tokenizer(tokenizer_run or default_run("tokenizer"))
+    ds = tokenizer.frames_per_token
     dataset = PreparedDataset(data, "all")
-    outcomes: dict[str, list[bool]] = {label: [] for label in REFERENCE}
+    real: dict[str, list[bool]] = {label: [] for label in REFERENCE}
+    decoded: dict[str, list[bool]] = {label: [] for label in REFERENCE}
     for clip_id in dataset.clip_ids:
         record = dataset.record(clip_id)
         label = clip_action(record) if record["source"] == "bandai" and not record.get("mirror_of") else None
-        if label in REFERENCE:
-            joints = np.asarray(dataset.joints(clip_id), dtype=np.float64)
-            outcomes[label].append(REFERENCE[label](joints).passed)
-    row = {"rows": "real Bandai clips (own length)", "model": str(data)}
-    for label, name in (("bow", "bow"), ("raise-up-both-hands", "raise_both_hands")):
-        row[name] = f"{sum(outcomes[label])}/{len(outcomes[label])}" if outcomes[label] else "-"
-    return [row]
+        if label not in REFERENCE:
+            continue
+        features = np.asarray(dataset.features(clip_id), dtype=np.float32)
+        usable = (len(features) // ds) * ds
+        real[label].append(REFERENCE[label](joints_from_features(features[:usable]).astype(np.float64)).passed)
+        with torch.no_grad():
+            x = torch.from_numpy(features[None, :usable])
+            y = tokenizer.decode(tokenizer.encode(x), length=usable, seed=0)
+        decoded[label].append(REFERENCE[label](joints_from_features(y[0].numpy()).astype(np.float64)).passed)
+    rows = []
+    for name, outcomes in (("real Bandai clips (own length)", real), ("the same clips through the tokenizer", decoded)):
+        row = {"rows": name, "model": str(data) if outcomes is real else tokenizer_run or str(default_run("tokenizer"))}
+        for label, check in (("bow", "bow"), ("raise-up-both-hands", "raise_both_hands")):
+            row[check] = f"{sum(outcomes[label])}/{len(outcomes[label])}" if outcomes[label] else "-"
+        rows.append(row)
+    return rows
 
 
 def main() -> int:

@@ -179,3 +179,39 @@ def test_planner_context_counts_every_usable_token_and_scores_an_oracle_at_one()
 
     acc = planner_context.context_accuracy(Oracle(), Oracle(), Tokenizer(), Texts(), Dataset(), ["short", "mid", "long"])
     assert acc == {"tokens": 3 + 5, "infill": 1.0, "text_only": 1.0, "ar_next": 1.0}
+
+
+def test_planner_behaviour_counts_passes_per_check_and_passes_the_lengths(monkeypatch):
+    """``planner_behaviour.planner_rows`` with a stand-in generator: a walk for the walk prompt,
+    standing for everything else; the lengths asked for are the checks' (6 s, and None for the
+    single actions) and are recorded per seed."""
+    import planner_behaviour
+
+    import motok_robot.planner.generate as generate_module
+    from motok_robot.eval import behaviour as B
+    from motok_robot.motion.synthetic import standing_clip, walking_clip
+
+    asked = []
+
+    class FakeGenerator:
+        model_id = "fake"
+
+        def __init__(self, kind):
+            self.kind = kind
+
+        def generate(self, text, seconds=None, seed=0, cfg_scale=None):
+            asked.append((text, seconds, seed, cfg_scale))
+            frames = int(20 * (seconds or 2.0))
+            joints = walking_clip(frames=frames) if text == B.WALK and seed == 0 else standing_clip(frames=frames)
+            return type("Motion", (), {"joints": joints, "seconds": frames / 20})()
+
+    monkeypatch.setattr(generate_module, "MotionGenerator", FakeGenerator)
+    rows = planner_behaviour.planner_rows(["masked"], 2, B.BehaviourThresholds(), cfg=1.5)
+    row = rows[0]
+    assert row["walk"] == "1/2" and row["walk_seeds"] == [0]
+    assert row["bow"] == "0/2" and row["raise_both_hands"] == "0/2"
+    assert row["run_faster"] == "0/2"  # standing never outruns the walk, nor a standing "walk"
+    assert row["seeds"][1]["seconds"] == {B.WALK: 6.0, B.RUN: 6.0, B.WAVE: 6.0, B.BOTH_HANDS: 2.0, B.BOW: 2.0}
+    assert {(t, s) for t, s, _, _ in asked} == {(B.WALK, 6.0), (B.RUN, 6.0), (B.WAVE, 6.0), (B.BOTH_HANDS, None),
+                                               (B.BOW, None)}
+    assert {c for *_, c in asked} == {1.5}
