@@ -31,8 +31,8 @@ from common import print_table, write_json  # noqa: E402
 
 from motok_robot.eval import behaviour as B  # noqa: E402
 
-#: real-clip reference: label -> the check that applies to one clip of it
-REFERENCE = {"bow": B.check_bow, "raise-up-both-hands": B.check_raise_both_hands}
+#: real-clip reference: Bandai label -> (check name, the check that applies to one clip of it)
+REFERENCE = {"bow": ("bow", B.check_bow), "raise-up-both-hands": ("raise_both_hands", B.check_raise_both_hands)}
 
 
 def planner_rows(planners: list[str], seeds: int, th: B.BehaviourThresholds, cfg: float | None) -> list[dict]:
@@ -63,10 +63,10 @@ def planner_rows(planners: list[str], seeds: int, th: B.BehaviourThresholds, cfg
     return rows
 
 
-def reference_rows(data: Path, tokenizer_run: Path | None = None) -> list[dict]:
+def reference_rows(data: Path) -> list[dict]:
     """The bow and raise-both-hands checks on the real Bandai clips of those labels (originals, at
     their own lengths), and on the same clips encoded and decoded by the tokenizer (what the best
-    possible token sequence gives; seed 0 of the decoder)."""
+    possible token sequence gives; the configured tokenizer, seed 0 of its decoder)."""
     import torch
 
     from motok_robot.data.dataset import PreparedDataset
@@ -75,7 +75,8 @@ def reference_rows(data: Path, tokenizer_run: Path | None = None) -> list[dict]:
     from motok_robot.planner.generate import default_run
     from motok_robot.tokenizer import load_tokenizer
 
-    tokenizer = load_tokenizer(tokenizer_run or default_run("tokenizer"))
+    tokenizer_run = default_run("tokenizer")
+    tokenizer = load_tokenizer(tokenizer_run)
     ds = tokenizer.frames_per_token
     dataset = PreparedDataset(data, "all")
     real: dict[str, list[bool]] = {label: [] for label in REFERENCE}
@@ -87,16 +88,17 @@ def reference_rows(data: Path, tokenizer_run: Path | None = None) -> list[dict]:
             continue
         features = np.asarray(dataset.features(clip_id), dtype=np.float32)
         usable = (len(features) // ds) * ds
-        real[label].append(REFERENCE[label](joints_from_features(features[:usable]).astype(np.float64)).passed)
+        check = REFERENCE[label][1]
+        real[label].append(check(joints_from_features(features[:usable]).astype(np.float64)).passed)
         with torch.no_grad():
             x = torch.from_numpy(features[None, :usable])
             y = tokenizer.decode(tokenizer.encode(x), length=usable, seed=0)
-        decoded[label].append(REFERENCE[label](joints_from_features(y[0].numpy()).astype(np.float64)).passed)
+        decoded[label].append(check(joints_from_features(y[0].numpy()).astype(np.float64)).passed)
     rows = []
     for name, outcomes in (("real Bandai clips (own length)", real), ("the same clips through the tokenizer", decoded)):
-        row = {"rows": name, "model": str(data) if outcomes is real else tokenizer_run or str(default_run("tokenizer"))}
-        for label, check in (("bow", "bow"), ("raise-up-both-hands", "raise_both_hands")):
-            row[check] = f"{sum(outcomes[label])}/{len(outcomes[label])}" if outcomes[label] else "-"
+        row = {"rows": name, "model": str(data if outcomes is real else tokenizer_run)}
+        for label, (check_name, _) in REFERENCE.items():
+            row[check_name] = f"{sum(outcomes[label])}/{len(outcomes[label])}" if outcomes[label] else "-"
         rows.append(row)
     return rows
 
