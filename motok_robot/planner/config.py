@@ -55,6 +55,11 @@ class PlannerConfig:
     #: at the first position, so that late tokens do not have to find the caption through
     #: attention alone.  False = ``M_g`` at the first position only (the runs shipped so far).
     global_every_position: bool = False
+    #: masked planner: add a learned embedding of each token's distance to the sequence end (in
+    #: tokens; a separate "end unknown" entry for training crops that stop mid-clip), so that
+    #: the planner knows where a motion has to be finished.  False = no such embedding (the
+    #: runs shipped so far, whose only sense of the end is the token convolution's padding).
+    end_embedding: bool = False
 
     @property
     def max_tokens(self) -> int:
@@ -87,6 +92,9 @@ class PlannerConfig:
         if self.global_every_position and self.kind != "ar":
             raise InputError("planner config: global_every_position is for the AR planner (the masked planner's "
                              "positions all attend to M_g)")
+        if self.end_embedding and self.kind != "masked":
+            raise InputError("planner config: end_embedding is for the masked planner (the AR planner ends with its "
+                             "[END] token)")
         if len(set(self.action_labels)) != len(self.action_labels):
             raise InputError("planner config: action_labels contains duplicates")
         return self

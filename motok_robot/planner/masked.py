@@ -35,6 +35,8 @@ class MaskedPlanner(Planner):
         self.head = nn.Linear(config.width, config.codebook_size)
         k = config.token_conv_kernel
         self.token_conv = nn.Conv1d(config.width, config.width, k, padding=k // 2) if k else None
+        # distance to the end 0 .. max_tokens - 1, and max_tokens = "the end is not in this crop"
+        self.end_embedding = nn.Embedding(config.max_tokens + 1, config.width) if config.end_embedding else None
 
     @property
     def mask_id(self) -> int:
@@ -45,13 +47,21 @@ class MaskedPlanner(Planner):
         return self.config.codebook_size + 1
 
     def logits(self, tokens: torch.Tensor, lengths: torch.Tensor, cond: Conditions,
-               drop: torch.Tensor | None = None) -> torch.Tensor:
-        """``tokens [B, N]`` (codes, [MASK] or [PAD]) -> logits over the K codes ``[B, N, K]``."""
+               drop: torch.Tensor | None = None, ends: torch.Tensor | None = None) -> torch.Tensor:
+        """``tokens [B, N]`` (codes, [MASK] or [PAD]) -> logits over the K codes ``[B, N, K]``.
+        ``ends [B]`` bool: the sequence ends where the motion ends (default: all True); only
+        planners with ``end_embedding`` use it."""
         b, n = tokens.shape
         x = self.token_embedding(tokens)
         if cond.local is not None:
             x = x + self.local_encoder(cond.local, n)
-        valid = torch.arange(n, device=tokens.device)[None] < lengths[:, None]
+        position = torch.arange(n, device=tokens.device)[None]
+        valid = position < lengths[:, None]
+        if self.end_embedding is not None:
+            to_end = (lengths[:, None] - 1 - position).clamp(min=0)
+            if ends is not None:
+                to_end = torch.where(ends.to(tokens.device)[:, None], to_end, torch.full_like(to_end, self.config.max_tokens))
+            x = x + self.end_embedding(to_end)
         if self.token_conv is not None:  # neighbours' tokens; padding is zero, as past the sequence's ends
             x = x * valid[..., None]
             x = x + self.token_conv(x.transpose(1, 2)).transpose(1, 2)
@@ -78,7 +88,7 @@ class MaskedPlanner(Planner):
         masked = (rank < n_mask[:, None]) & valid
         inputs = torch.where(masked, torch.full_like(tokens, self.mask_id), tokens)
         inputs = inputs.masked_fill(~valid, self.pad_id)
-        logits = self.logits(inputs, lengths, cond, drop)
+        logits = self.logits(inputs, lengths, cond, drop, ends)
         target = tokens[masked]
         picked = logits[masked]
         if per_sample:
