@@ -1,10 +1,10 @@
 """Behaviour pass rates of the planners over many seeds (the tests check seed 0 only).
 
-Run: python benchmarks/planner_behaviour.py [--planner masked ar] [--seeds 12] [--seconds S|auto]
+Run: python benchmarks/planner_behaviour.py [--planner masked ar] [--seeds 12] [--first-seed 0] [--seconds S|auto]
        [--cfg S] [--data runs/prepared] [--threads 2]
        [--out benchmarks/results/planner_behaviour.json]
 
-For every planner and seed ``0..N-1`` it generates the five prompts of
+For every planner and seed ``F..F+N-1`` (``--first-seed``, default 0) it generates the five prompts of
 :mod:`motok_robot.eval.behaviour` and runs its six checks (walk, a planted foot, run faster than
 walk, wave the right hand, raise both hands, bow and come back up) on the configured models
 (``models/`` or ``$MOTOK_ROBOT_MODELS``), with the default sampling settings unless ``--cfg`` is
@@ -35,14 +35,14 @@ from motok_robot.eval import behaviour as B  # noqa: E402
 REFERENCE = {"bow": ("bow", B.check_bow), "raise-up-both-hands": ("raise_both_hands", B.check_raise_both_hands)}
 
 
-def planner_rows(planners: list[str], seeds: int, th: B.BehaviourThresholds, cfg: float | None) -> list[dict]:
+def planner_rows(planners: list[str], seeds: range, th: B.BehaviourThresholds, cfg: float | None) -> list[dict]:
     from motok_robot.planner.generate import MotionGenerator
 
     rows = []
     for kind in planners:
         gen = MotionGenerator(kind)
         per_seed = []
-        for seed in range(seeds):
+        for seed in seeds:
             lengths: dict[str, float] = {}
 
             def make(text: str, seconds: float | None) -> np.ndarray:
@@ -57,7 +57,7 @@ def planner_rows(planners: list[str], seeds: int, th: B.BehaviourThresholds, cfg
         row = {"rows": f"{kind} planner", "model": gen.model_id, "seeds": per_seed}
         for name in B.CHECKS:
             passed = [s["seed"] for s in per_seed if s[name]["passed"]]
-            row[name] = f"{len(passed)}/{seeds}"
+            row[name] = f"{len(passed)}/{len(seeds)}"
             row[f"{name}_seeds"] = passed
         rows.append(row)
     return rows
@@ -107,6 +107,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--planner", nargs="+", choices=("masked", "ar"), default=["masked", "ar"])
     parser.add_argument("--seeds", type=int, default=12)
+    parser.add_argument("--first-seed", type=int, default=0,
+                        help="first seed (default 0); a fresh range checks a choice made on seeds 0..N-1")
     parser.add_argument("--seconds", default=None,
                         help="one length for every motion, seconds or 'auto' (default: the checks' own lengths)")
     parser.add_argument("--cfg", type=float, default=None, help="guidance scale (default: the sampling default)")
@@ -116,6 +118,9 @@ def main() -> int:
     args = parser.parse_args()
     if args.seeds < 1:
         parser.error("--seeds must be >= 1")
+    if args.first_seed < 0:
+        parser.error("--first-seed must be >= 0")
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
     th = B.BehaviourThresholds()
     if args.seconds is not None:
         try:
@@ -131,16 +136,16 @@ def main() -> int:
     import torch
 
     torch.set_num_threads(args.threads)
-    rows = planner_rows(args.planner, args.seeds, th, args.cfg)
+    rows = planner_rows(args.planner, seeds, th, args.cfg)
     if args.data is not None:
         rows += reference_rows(args.data)
     def length(s: float | None) -> str:
         return "own length" if s is None else f"{s:g} s"
 
-    print_table(rows, ["rows", *B.CHECKS], title=f"Behaviour checks passed, seeds 0-{args.seeds - 1}; walk, run, wave "
+    print_table(rows, ["rows", *B.CHECKS], title=f"Behaviour checks passed, seeds {seeds[0]}-{seeds[-1]}; walk, run, wave "
                 f"{length(th.seconds)}, hands and bow {length(th.action_seconds)}; guidance "
                 f"{'default' if args.cfg is None else args.cfg}")
-    path = write_json(args.out, {"benchmark": "planner_behaviour", "seeds": args.seeds, "cfg_scale": args.cfg, "thresholds": asdict(th),
+    path = write_json(args.out, {"benchmark": "planner_behaviour", "seeds": args.seeds, "first_seed": args.first_seed, "cfg_scale": args.cfg, "thresholds": asdict(th),
                                  "rows": rows}, threads=args.threads)
     print(f"wrote {path}")
     return 0

@@ -206,7 +206,7 @@ def test_planner_behaviour_counts_passes_per_check_and_passes_the_lengths(monkey
             return type("Motion", (), {"joints": joints, "seconds": frames / 20})()
 
     monkeypatch.setattr(generate_module, "MotionGenerator", FakeGenerator)
-    rows = planner_behaviour.planner_rows(["masked"], 2, B.BehaviourThresholds(), cfg=1.5)
+    rows = planner_behaviour.planner_rows(["masked"], range(2), B.BehaviourThresholds(), cfg=1.5)
     row = rows[0]
     assert row["walk"] == "1/2" and row["walk_seeds"] == [0]
     assert row["bow"] == "0/2" and row["raise_both_hands"] == "0/2"
@@ -215,3 +215,8 @@ def test_planner_behaviour_counts_passes_per_check_and_passes_the_lengths(monkey
     assert {(t, s) for t, s, _, _ in asked} == {(B.WALK, 6.0), (B.RUN, 6.0), (B.WAVE, 6.0), (B.BOTH_HANDS, None),
                                                (B.BOW, None)}
     assert {c for *_, c in asked} == {1.5}
+
+    asked.clear()  # a later seed range (--first-seed) counts over its own seeds
+    row = planner_behaviour.planner_rows(["masked"], range(1, 3), B.BehaviourThresholds(), cfg=None)[0]
+    assert row["walk"] == "0/2" and [s["seed"] for s in row["seeds"]] == [1, 2]
+    assert {seed for _, _, seed, _ in asked} == {1, 2}
