@@ -59,10 +59,14 @@ if [ "${TOKENIZER_STAGE2:-0}" = 1 ]; then
       --freeze-tokens --config models/tokenizer_finetune.json "${DEV[@]}"
   fi
 fi
+# The masked planner uses the config defaults. The AR planner's recipe is models/planner_ar_train.json:
+# 6 layers, four token grids per clip and balanced sampling (balance_groups 0.5: rare actions such
+# as the 28 bows drawn more often); see models/MODEL_CARD.md, "The AR planner retrained with
+# balanced sampling".
 motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind masked \
   --out "$WORK/planner_masked" "${DEV[@]}" $(resume_flag "$WORK/planner_masked")
 motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind ar \
-  --out "$WORK/planner_ar" "${DEV[@]}" $(resume_flag "$WORK/planner_ar")
+  --config models/planner_ar_train.json --out "$WORK/planner_ar" "${DEV[@]}" $(resume_flag "$WORK/planner_ar")
 motok-robot train evaluator --data "$PREPARED" --out "$WORK/evaluator" "${DEV[@]}" $(resume_flag "$WORK/evaluator")
 
 # ship: weights, configs and training curves only (no optimiser state, no caches)

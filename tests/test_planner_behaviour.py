@@ -1,11 +1,15 @@
 """Behaviour of the configured (shipped) text-to-motion models, checked by measurable properties.
 
 Runs against whatever models are configured (``models/`` at the repository root, or the folder in
-``$MOTOK_ROBOT_MODELS``) with the default seed; each check skips, with the reason, when the
-tokenizer or the planner is not there.
+``$MOTOK_ROBOT_MODELS``); each check skips, with the reason, when the tokenizer or the planner is
+not there.  Two kinds of test: each check with the default seed (what ``motok-robot generate``
+gives without ``--seed``), and every check over seeds 0-7 against a floor of passes
+(:data:`MIN_PASSES`): one seed passing or failing says little about a sampler.
 """
 
 from __future__ import annotations
+
+from functools import lru_cache
 
 import numpy as np
 import pytest
@@ -19,11 +23,11 @@ TH = B.BehaviourThresholds()
 #: Behaviours a shipped model is known to miss, keyed by the sha256 prefix of its weights. These
 #: run as strict expected failures for exactly that file (a retrained model is checked normally,
 #: and if the shipped one starts passing the test fails so the entry gets removed). The pass rates
-#: over seeds 0-11 are in benchmarks/results/planner_behaviour.json (python
+#: over seeds 0-95 are in benchmarks/results/planner_behaviour*.json (python
 #: benchmarks/planner_behaviour.py) and the model card: seed 0 passing says little about a sampler.
 KNOWN_MISSES = {
-    "ba0682131936b6f1": {"bow": "the shipped AR planner's bows are mostly shallow; it bows and comes back "
-                                "up in 1 of seeds 0-11, not with seed 0"},
+    "87b3f8e4454f3fcb": {"bow": "with seed 0 the shipped AR planner bows 46 degrees but comes back only to 19 "
+                                "(the check asks for 15); it bows and comes back up in 47 of seeds 0-95"},
 }
 
 
@@ -48,14 +52,25 @@ def _models_or_skip(kind: str):
             pytest.skip(f"no trained {what} model in {run} (the shipped models land with the end-to-end issue)")
 
 
-def _generate(kind: str, text: str, seconds: float | None) -> np.ndarray:
+def _generate(kind: str, text: str, seconds: float | None, seed: int = 0) -> np.ndarray:
+    from motok_robot.planner.generate import default_run
+
     _models_or_skip(kind)
+    # the run folders are part of the key: a changed $MOTOK_ROBOT_MODELS is never served from the cache
+    runs = (str(default_run("tokenizer").resolve()), str(default_run(kind).resolve()))
+    return _generated(runs, kind, text, seconds, seed).copy()
+
+
+@lru_cache(maxsize=None)
+def _generated(runs: tuple[str, str], kind: str, text: str, seconds: float | None, seed: int) -> np.ndarray:
     import torch
 
     torch.set_num_threads(1)
     from motok_robot.planner.generate import generate
 
-    return generate(text, seconds=seconds, seed=0, planner=kind).joints.astype(np.float64)
+    tokenizer_run, planner_run = runs
+    return generate(text, seconds=seconds, seed=seed, planner=kind, tokenizer_run=tokenizer_run,
+                    planner_run=planner_run).joints.astype(np.float64)
 
 
 def _passes(result) -> None:
@@ -96,3 +111,32 @@ def test_raise_both_hands(kind, request):
 def test_bow_pitches_forward_and_back(kind, request):
     _expect_known_miss(request, kind, "bow")
     _passes(B.check_bow(_generate(kind, B.BOW, TH.action_seconds), FPS))
+
+
+#: Seeds of the rate test.
+RATE_SEEDS = range(8)
+#: Fewest passes out of the 8 :data:`RATE_SEEDS`, per check: a regression floor for the configured
+#: models.  The frequent labels of the data (walk, run, wave, raise both hands) must work with every
+#: seed; the two weak behaviours less often: a planted foot on the walk in at least 4 of the 8,
+#: the bow (15 takes in the data) in at least 2.  These are floors on fixed seeds, not rates: the
+#: shipped models' rates over seeds 0-95 are in the model card (python
+#: benchmarks/planner_behaviour.py --seeds 48 [--first-seed 48]).
+MIN_PASSES = {"walk": 8, "walk_planted": 4, "run_faster": 8, "wave_right_hand": 8, "raise_both_hands": 8, "bow": 2}
+
+
+@pytest.mark.parametrize("kind", PLANNERS)
+def test_every_behaviour_over_eight_seeds_meets_its_floor(kind):
+    """All six checks over seeds 0-7; reports every check's passing seeds and the first reason
+    of each failing one."""
+    passes: dict[str, list[int]] = {name: [] for name in B.CHECKS}
+    reasons: dict[str, str] = {}
+    for seed in RATE_SEEDS:
+        results = B.check_all(lambda text, seconds: _generate(kind, text, seconds, seed), FPS, TH)
+        for name, result in results.items():
+            if result.passed:
+                passes[name].append(seed)
+            else:
+                reasons.setdefault(name, f"seed {seed}: {result.reason}")
+    short = {name: f"{len(passes[name])}/{len(RATE_SEEDS)} (floor {MIN_PASSES[name]}; {reasons.get(name, 'all passed')})"
+             for name in B.CHECKS if len(passes[name]) < MIN_PASSES[name]}
+    assert not short, f"{kind} planner below its floor: {short}"

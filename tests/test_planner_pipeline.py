@@ -417,3 +417,27 @@ def test_balance_groups_trains_and_is_checked(runs, tmp_path):
     saved = json.loads((out / "config.json").read_text())
     assert saved["train"]["balance_groups"] == 1.0
     assert (out / "model.safetensors").is_file()
+
+
+
+def test_ar_training_recipe_parses_and_matches_the_shipped_ar_planner():
+    """models/planner_ar_train.json (passed with --config by models/train_default_models.sh)
+    parses into valid configs, and every field it sets is what the shipped AR planner's
+    config.json records it was trained with (checked only when that planner is there)."""
+    from pathlib import Path
+
+    from motok_robot.planner.config import PlannerConfig, planner_config_from_dict, to_dict, train_config_from_dict
+
+    models = Path(__file__).resolve().parents[1] / "models"
+    recipe = json.loads((models / "planner_ar_train.json").read_text())
+    assert set(recipe) <= {"planner", "train"}
+    planner_config_from_dict({**to_dict(PlannerConfig(kind="ar")), **recipe.get("planner", {})})
+    train_config_from_dict(recipe.get("train", {})).validate("ar")
+    shipped = models / "planner_ar" / "config.json"
+    if not shipped.is_file():
+        pytest.skip(f"no shipped AR planner in {shipped.parent}")
+    saved = json.loads(shipped.read_text())
+    assert saved["planner"]["kind"] == "ar"
+    for section, values in recipe.items():
+        for key, value in values.items():
+            assert saved[section][key] == value, f"{shipped}: {section}.{key} is {saved[section][key]!r}, recipe {value!r}"
