@@ -1,4 +1,4 @@
-"""Behaviour pass rates of the planners over many seeds (the tests check seed 0 only).
+"""Behaviour pass rates of the planners over many seeds (the tests check seed 0, and floors over 0-7).
 
 Run: python benchmarks/planner_behaviour.py [--planner masked ar] [--seeds 12] [--first-seed 0] [--seconds S|auto]
        [--cfg S] [--data runs/prepared] [--threads 2]

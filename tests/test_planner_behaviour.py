@@ -126,8 +126,8 @@ MIN_PASSES = {"walk": 8, "walk_planted": 4, "run_faster": 8, "wave_right_hand": 
 
 @pytest.mark.parametrize("kind", PLANNERS)
 def test_every_behaviour_over_eight_seeds_meets_its_floor(kind):
-    """All six checks over seeds 0-7; reports every check's passing seeds and the first reason
-    of each failing one."""
+    """All six checks over seeds 0-7; a check below its floor is reported with its count and the
+    reason of its first failing seed."""
     passes: dict[str, list[int]] = {name: [] for name in B.CHECKS}
     reasons: dict[str, str] = {}
     for seed in RATE_SEEDS:

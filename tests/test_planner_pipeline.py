@@ -419,7 +419,6 @@ def test_balance_groups_trains_and_is_checked(runs, tmp_path):
     assert (out / "model.safetensors").is_file()
 
 
-
 def test_ar_training_recipe_parses_and_matches_the_shipped_ar_planner():
     """models/planner_ar_train.json (passed with --config by models/train_default_models.sh)
     parses into valid configs, and every field it sets is what the shipped AR planner's

@@ -2,9 +2,9 @@
 
 Each check takes generated joints (``[T, 22, 3]``, metres, z up) and returns a
 :class:`BehaviourResult` (passed, the measured values, a one-line reason).  The same checks run
-in ``tests/test_planner_behaviour.py`` (the shipped models, seed 0) and in
-``benchmarks/planner_behaviour.py`` (pass rates over many seeds, the more honest number: one seed
-passing says little about a sampler).  numpy only; the planted-foot check uses
+in ``tests/test_planner_behaviour.py`` (the shipped models: seed 0, and floors over seeds 0-7)
+and in ``benchmarks/planner_behaviour.py`` (pass rates over many seeds, the more honest number:
+one seed passing says little about a sampler).  numpy only; the planted-foot check uses
 :func:`retarget.contacts.detect_contacts`.
 
 | check | prompt(s) | passes when |
