@@ -419,8 +419,8 @@ def test_balance_groups_trains_and_is_checked(runs, tmp_path):
     assert (out / "model.safetensors").is_file()
 
 
-def test_init_fine_tunes_from_a_trained_planner(runs, tmp_path, capsys):
-    """--init starts from the named run's weights and architecture with a fresh schedule: with
+def test_init_from_fine_tunes_a_trained_planner(runs, tmp_path, capsys):
+    """--init-from starts from the named run's weights and architecture with a fresh schedule: with
     zero steps' worth of learning rate the weights come back unchanged, with some they move; the
     run records where it started; wrong kind, a 'planner' section and --resume are refused."""
     from safetensors.torch import load_file
@@ -429,37 +429,37 @@ def test_init_fine_tunes_from_a_trained_planner(runs, tmp_path, capsys):
             "--val-every", "2", "--seed", "3"]
     frozen = tmp_path / "lr0.json"
     frozen.write_text(json.dumps({"train": {"lr": 0.0, "batch_size": 4, "val_batches": 2}}))
-    assert main(base + ["--init", str(runs / "masked"), "--out", str(tmp_path / "same"), "--steps", "2",
+    assert main(base + ["--init-from", str(runs / "masked"), "--out", str(tmp_path / "same"), "--steps", "2",
                         "--config", str(frozen)]) == 0
     start = load_file(str(runs / "masked" / "model.safetensors"))
     same = load_file(str(tmp_path / "same" / "model.safetensors"))
     assert start.keys() == same.keys() and all(torch.equal(start[k], same[k]) for k in start)
     saved = json.loads((tmp_path / "same" / "config.json").read_text())
-    assert saved["init"]["path"] == str((runs / "masked").resolve()) and len(saved["init"]["sha256"]) == 16
+    assert saved["init_from"]["path"] == str((runs / "masked").resolve()) and len(saved["init_from"]["sha256"]) == 16
     assert saved["planner"] == json.loads((runs / "masked" / "config.json").read_text())["planner"]
     assert saved["train"]["lr"] == 0.0 and saved["train"]["steps"] == 2
 
     tuned = tmp_path / "tuned.json"
     tuned.write_text(json.dumps({"train": {"lr": 0.01, "warmup_steps": 1, "batch_size": 4, "val_batches": 2,
                                            "balance_groups": 0.5}}))
-    assert main(base + ["--init", str(runs / "masked"), "--out", str(tmp_path / "moved"), "--steps", "2",
+    assert main(base + ["--init-from", str(runs / "masked"), "--out", str(tmp_path / "moved"), "--steps", "2",
                         "--config", str(tuned)]) == 0
     moved = load_file(str(tmp_path / "moved" / "model.safetensors"))
     assert any(not torch.equal(start[k], moved[k]) for k in start)
     # a fine-tuned run resumes like any other and keeps its record of where it started
     assert main(base + ["--out", str(tmp_path / "moved"), "--steps", "4", "--resume"]) == 0
-    assert json.loads((tmp_path / "moved" / "config.json").read_text())["init"] == saved["init"]
+    assert json.loads((tmp_path / "moved" / "config.json").read_text())["init_from"] == saved["init_from"]
 
     capsys.readouterr()
     as_ar = ["ar" if a == "masked" else a for a in base]
-    assert main(as_ar + ["--init", str(runs / "masked"), "--out", str(tmp_path / "kind")]) == 2
+    assert main(as_ar + ["--init-from", str(runs / "masked"), "--out", str(tmp_path / "kind")]) == 2
     assert "is a 'masked' planner run, not 'ar'" in capsys.readouterr().err
-    assert main(base + ["--init", str(runs / "masked"), "--out", str(tmp_path / "arch"),
+    assert main(base + ["--init-from", str(runs / "masked"), "--out", str(tmp_path / "arch"),
                         "--config", str(runs / "tiny.json")]) == 2
     assert "remove the 'planner' section" in capsys.readouterr().err
-    assert main(base + ["--init", str(runs / "masked"), "--out", str(tmp_path / "moved"), "--resume"]) == 2
+    assert main(base + ["--init-from", str(runs / "masked"), "--out", str(tmp_path / "moved"), "--resume"]) == 2
     assert "cannot be combined with --resume" in capsys.readouterr().err
-    assert main(base + ["--init", str(tmp_path / "nowhere"), "--out", str(tmp_path / "none")]) == 2
+    assert main(base + ["--init-from", str(tmp_path / "nowhere"), "--out", str(tmp_path / "none")]) == 2
     assert "no model.safetensors there" in capsys.readouterr().err
 
 

@@ -25,7 +25,7 @@ def register(commands, groups) -> None:
     train.add_argument("--kind", choices=("masked", "ar"), default="masked", help="planner type (default masked)")
     train.add_argument("--out", required=True, type=Path, help="run directory to write")
     train.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
-    train.add_argument("--init", type=Path, default=None,
+    train.add_argument("--init-from", type=Path, default=None,
                        help="start from this trained planner run's weights and architecture (fine-tuning; "
                             "fresh optimiser and schedule, same tokenizer and action labels)")
     train.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
@@ -86,7 +86,7 @@ def _train(args: argparse.Namespace) -> int:
             train_over[key] = value
     run = train_planner(args.data, args.tokenizer, args.kind, args.out, resume=args.resume, seed=args.seed,
                         planner_overrides=planner_over, train_overrides=train_over,
-                        text_encoder=args.text_encoder, device=args.device, init=args.init)
+                        text_encoder=args.text_encoder, device=args.device, init_from=args.init_from)
     print(f"planner run written to {run}")
     return 0
 

@@ -2,7 +2,7 @@
 
 Seeded (torch + numpy generators saved in the checkpoint, so a resumed run continues the same
 random stream), resumable after a kill (``--resume``), can start from a trained planner
-(``--init``, fine-tuning), progress bar, periodic validation
+(``--init-from``, fine-tuning), progress bar, periodic validation
 (loss and token accuracy, length-estimator accuracy) logged to ``RUN/metrics.csv``,
 safetensors checkpoints only.
 """
@@ -87,11 +87,11 @@ def train_planner(
     train_overrides: dict | None = None,
     text_encoder: str | None = None,
     device: str | None = None,
-    init: str | Path | None = None,
+    init_from: str | Path | None = None,
 ) -> Path:
     """Train a planner of ``kind`` ("masked" | "ar") on a prepared dataset; returns the run directory.
 
-    ``init`` names a trained planner run to start from (fine-tuning): its architecture, text
+    ``init_from`` names a trained planner run to start from (fine-tuning): its architecture, text
     encoder and weights are taken, the optimiser and the learning-rate schedule start afresh with
     this run's training settings, and the tokenizer and action labels must be the ones it was
     trained with."""
@@ -100,8 +100,8 @@ def train_planner(
 
     out = Path(out_dir)
     ckpt = out / CHECKPOINT_FILE
-    if resume and init is not None:
-        raise InputError("--init starts a new run from trained weights; it cannot be combined with --resume")
+    if resume and init_from is not None:
+        raise InputError("--init-from starts a new run from trained weights; it cannot be combined with --resume")
     if resume:
         if not ckpt.is_file():
             raise InputError(f"--resume: {ckpt} not found (start a new run without --resume)")
@@ -117,8 +117,8 @@ def train_planner(
             raise InputError(f"{out} already holds a planner run; pass --resume to continue it or choose another --out")
         config = PlannerConfig(kind=kind)
         train_cfg = PlannerTrainConfig()
-        if init is not None:
-            init_saved, config = _init_run_config(init, kind, planner_overrides, text_encoder)
+        if init_from is not None:
+            init_saved, config = _init_run_config(init_from, kind, planner_overrides, text_encoder)
         elif planner_overrides:
             config = planner_config_from_dict({**to_dict(config), **planner_overrides, "kind": kind})
         if train_overrides:
@@ -126,7 +126,7 @@ def train_planner(
             train_cfg = train_config_from_dict(merged)
         if seed is not None:
             train_cfg.seed = int(seed)
-        if text_encoder is not None and init is None:
+        if text_encoder is not None and init_from is None:
             config.text_encoder = text_encoder
     if device is not None:
         train_cfg.device = device
@@ -141,17 +141,17 @@ def train_planner(
     mismatch = tokenizer_mismatch(saved.get("tokenizer") or {}, tok_dir, tokenizer) if resume else None
     if mismatch:
         raise InputError(f"--resume: tokenizer {tok_dir} is not the one this run was trained with: {mismatch}")
-    if init is not None:
+    if init_from is not None:
         mismatch = tokenizer_mismatch(init_saved.get("tokenizer") or {}, tok_dir, tokenizer)
         if mismatch:
-            raise InputError(f"--init {init}: tokenizer {tok_dir} is not the one that planner was trained with: {mismatch}")
+            raise InputError(f"--init-from {init_from}: tokenizer {tok_dir} is not the one that planner was trained with: {mismatch}")
         labels = action_labels_of(data_dir, "train")
         if list(labels) != list(config.action_labels):
-            raise InputError(f"--init {init}: the action labels of {data_dir} ({len(labels)}) differ from the ones "
+            raise InputError(f"--init-from {init_from}: the action labels of {data_dir} ({len(labels)}) differ from the ones "
                              f"that planner was trained with ({len(config.action_labels)}); fine-tune on data with "
                              "the same labels, or train a new planner")
     encoder = load_text_encoder(config.text_encoder)
-    if not resume and init is None:
+    if not resume and init_from is None:
         config = replace(config, codebook_size=tokenizer.config.codebook_size, downsample=tokenizer.frames_per_token,
                          fps=int(getattr(tokenizer.config, "fps", config.fps)), text_dim=encoder.dim,
                          action_labels=action_labels_of(data_dir, "train"))
@@ -159,10 +159,10 @@ def train_planner(
     extra = {"train": to_dict(train_cfg),
              "tokenizer": record,
              "text_encoder": encoder.name, "data": str(Path(data_dir).resolve())}
-    if init is not None:
-        extra["init"] = init_record(init)
-    elif resume and saved.get("init"):
-        extra["init"] = saved["init"]
+    if init_from is not None:
+        extra["init_from"] = init_record(init_from)
+    elif resume and saved.get("init_from"):
+        extra["init_from"] = saved["init_from"]
     write_run_config(out, config, extra)
 
     cache = out / "cache"
@@ -178,8 +178,8 @@ def train_planner(
 
     draw_p = train_data.sampling_probabilities(train_cfg.balance_groups)
     model = build_planner(config).to(dev)
-    if init is not None:
-        load_checked_weights(model, Path(init) / WEIGHTS_FILE)
+    if init_from is not None:
+        load_checked_weights(model, Path(init_from) / WEIGHTS_FILE)
     decay = [p for n, p in model.named_parameters() if p.dim() >= 2]
     no_decay = [p for n, p in model.named_parameters() if p.dim() < 2]
     optimiser = torch.optim.AdamW([{"params": decay, "weight_decay": train_cfg.weight_decay},
@@ -259,30 +259,30 @@ def train_planner(
     return out
 
 
-def _init_run_config(init: str | Path, kind: str, planner_overrides: dict | None,
+def _init_run_config(init_from: str | Path, kind: str, planner_overrides: dict | None,
                      text_encoder: str | None) -> tuple[dict, PlannerConfig]:
-    """The run config and architecture of the planner run ``--init`` names, checked for a fine-tune."""
-    init = Path(init)
-    if not (init / WEIGHTS_FILE).is_file():
-        raise InputError(f"--init {init}: no {WEIGHTS_FILE} there (expected a trained planner run directory)")
-    saved = read_run_config(init)
-    config = saved_planner_config(saved["planner"], where=f"{init / CONFIG_FILE} 'planner'")
+    """The run config and architecture of the planner run ``--init-from`` names, checked for a fine-tune."""
+    init_from = Path(init_from)
+    if not (init_from / WEIGHTS_FILE).is_file():
+        raise InputError(f"--init-from {init_from}: no {WEIGHTS_FILE} there (expected a trained planner run directory)")
+    saved = read_run_config(init_from)
+    config = saved_planner_config(saved["planner"], where=f"{init_from / CONFIG_FILE} 'planner'")
     if config.kind != kind:
-        raise InputError(f"--init {init} is a {config.kind!r} planner run, not {kind!r}")
+        raise InputError(f"--init-from {init_from} is a {config.kind!r} planner run, not {kind!r}")
     if planner_overrides:
-        raise InputError(f"--init {init}: the architecture comes from that run; remove the 'planner' section "
+        raise InputError(f"--init-from {init_from}: the architecture comes from that run; remove the 'planner' section "
                          f"({', '.join(sorted(planner_overrides))}) from --config")
     if text_encoder is not None and text_encoder != config.text_encoder:
-        raise InputError(f"--init {init} was trained with text encoder {config.text_encoder!r}, not {text_encoder!r}")
+        raise InputError(f"--init-from {init_from} was trained with text encoder {config.text_encoder!r}, not {text_encoder!r}")
     return saved, config
 
 
-def init_record(init: str | Path) -> dict[str, str]:
+def init_record(init_from: str | Path) -> dict[str, str]:
     """What a fine-tuned run stores about the run it started from: path and weights digest."""
     from motok_robot.planner.data import file_digest
 
-    init = Path(init)
-    return {"path": str(init.resolve()), "sha256": file_digest(init / WEIGHTS_FILE)}
+    init_from = Path(init_from)
+    return {"path": str(init_from.resolve()), "sha256": file_digest(init_from / WEIGHTS_FILE)}
 
 
 def _best_val_loss(metrics_path: Path, step: int) -> float:
