@@ -1,14 +1,14 @@
 """Behaviour pass rates of the planners over many seeds (the tests check seed 0, and floors over 0-7).
 
 Run: python benchmarks/planner_behaviour.py [--planner masked ar] [--seeds 12] [--first-seed 0] [--seconds S|auto]
-       [--cfg S] [--data runs/prepared] [--threads 2]
+       [--cfg S] [--steps N] [--data runs/prepared] [--threads 2]
        [--out benchmarks/results/planner_behaviour.json]
 
 For every planner and seed ``F..F+N-1`` (``--first-seed``, default 0) it generates the five prompts of
 :mod:`motok_robot.eval.behaviour` and runs its six checks (walk, a planted foot, run faster than
 walk, wave the right hand, raise both hands, bow and come back up) on the configured models
-(``models/`` or ``$MOTOK_ROBOT_MODELS``), with the default sampling settings unless ``--cfg`` is
-given, at the checks' lengths (6 s for the walk, run and wave; the planner's own length, from its
+(``models/`` or ``$MOTOK_ROBOT_MODELS``), with the default sampling settings unless ``--cfg`` (guidance scale) or ``--steps``
+(the masked planner's unmasking iterations) is given, at the checks' lengths (6 s for the walk, run and wave; the planner's own length, from its
 length estimator, for raising both hands and bowing); ``--seconds`` sets one length for all (a
 number, or ``auto`` for the planner's own). With ``--data`` (a prepared dataset) the bow and
 raise-both-hands checks also run on the real Bandai Namco clips of those labels, at their own
@@ -35,7 +35,8 @@ from motok_robot.eval import behaviour as B  # noqa: E402
 REFERENCE = {"bow": ("bow", B.check_bow), "raise-up-both-hands": ("raise_both_hands", B.check_raise_both_hands)}
 
 
-def planner_rows(planners: list[str], seeds: range, th: B.BehaviourThresholds, cfg: float | None) -> list[dict]:
+def planner_rows(planners: list[str], seeds: range, th: B.BehaviourThresholds, cfg: float | None,
+                 steps: int | None = None) -> list[dict]:
     from motok_robot.planner.generate import MotionGenerator
 
     rows = []
@@ -46,7 +47,7 @@ def planner_rows(planners: list[str], seeds: range, th: B.BehaviourThresholds, c
             lengths: dict[str, float] = {}
 
             def make(text: str, seconds: float | None) -> np.ndarray:
-                motion = gen.generate(text, seconds=seconds, seed=seed, cfg_scale=cfg)
+                motion = gen.generate(text, seconds=seconds, seed=seed, cfg_scale=cfg, steps=steps)
                 lengths[text] = motion.seconds
                 return motion.joints.astype(np.float64)
 
@@ -112,6 +113,8 @@ def main() -> int:
     parser.add_argument("--seconds", default=None,
                         help="one length for every motion, seconds or 'auto' (default: the checks' own lengths)")
     parser.add_argument("--cfg", type=float, default=None, help="guidance scale (default: the sampling default)")
+    parser.add_argument("--steps", type=int, default=None,
+                        help="masked planner unmasking iterations (default: the sampling default, 10)")
     parser.add_argument("--data", type=Path, default=None, help="prepared dataset for the real-clip reference row")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/planner_behaviour.json"))
@@ -120,6 +123,8 @@ def main() -> int:
         parser.error("--seeds must be >= 1")
     if args.first_seed < 0:
         parser.error("--first-seed must be >= 0")
+    if args.steps is not None and args.steps < 1:
+        parser.error("--steps must be >= 1")
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     th = B.BehaviourThresholds()
     if args.seconds is not None:
@@ -136,7 +141,7 @@ def main() -> int:
     import torch
 
     torch.set_num_threads(args.threads)
-    rows = planner_rows(args.planner, seeds, th, args.cfg)
+    rows = planner_rows(args.planner, seeds, th, args.cfg, args.steps)
     if args.data is not None:
         rows += reference_rows(args.data)
     def length(s: float | None) -> str:
@@ -144,8 +149,9 @@ def main() -> int:
 
     print_table(rows, ["rows", *B.CHECKS], title=f"Behaviour checks passed, seeds {seeds[0]}-{seeds[-1]}; walk, run, wave "
                 f"{length(th.seconds)}, hands and bow {length(th.action_seconds)}; guidance "
-                f"{'default' if args.cfg is None else args.cfg}")
-    path = write_json(args.out, {"benchmark": "planner_behaviour", "seeds": args.seeds, "first_seed": args.first_seed, "cfg_scale": args.cfg, "thresholds": asdict(th),
+                f"{'default' if args.cfg is None else args.cfg}; masked steps "
+                f"{'default' if args.steps is None else args.steps}")
+    path = write_json(args.out, {"benchmark": "planner_behaviour", "seeds": args.seeds, "first_seed": args.first_seed, "cfg_scale": args.cfg, "steps": args.steps, "thresholds": asdict(th),
                                  "rows": rows}, threads=args.threads)
     print(f"wrote {path}")
     return 0

@@ -191,7 +191,7 @@ def test_planner_behaviour_counts_passes_per_check_and_passes_the_lengths(monkey
     from motok_robot.eval import behaviour as B
     from motok_robot.motion.synthetic import standing_clip, walking_clip
 
-    asked = []
+    asked, asked_steps = [], set()
 
     class FakeGenerator:
         model_id = "fake"
@@ -199,8 +199,9 @@ def test_planner_behaviour_counts_passes_per_check_and_passes_the_lengths(monkey
         def __init__(self, kind):
             self.kind = kind
 
-        def generate(self, text, seconds=None, seed=0, cfg_scale=None):
+        def generate(self, text, seconds=None, seed=0, cfg_scale=None, steps=None):
             asked.append((text, seconds, seed, cfg_scale))
+            asked_steps.add(steps)
             frames = int(20 * (seconds or 2.0))
             joints = walking_clip(frames=frames) if text == B.WALK and seed == 0 else standing_clip(frames=frames)
             return type("Motion", (), {"joints": joints, "seconds": frames / 20})()
@@ -214,9 +215,11 @@ def test_planner_behaviour_counts_passes_per_check_and_passes_the_lengths(monkey
     assert row["seeds"][1]["seconds"] == {B.WALK: 6.0, B.RUN: 6.0, B.WAVE: 6.0, B.BOTH_HANDS: 2.0, B.BOW: 2.0}
     assert {(t, s) for t, s, _, _ in asked} == {(B.WALK, 6.0), (B.RUN, 6.0), (B.WAVE, 6.0), (B.BOTH_HANDS, None),
                                                (B.BOW, None)}
-    assert {c for *_, c in asked} == {1.5}
+    assert {c for *_, c in asked} == {1.5} and asked_steps == {None}
 
     asked.clear()  # a later seed range (--first-seed) counts over its own seeds
-    row = planner_behaviour.planner_rows(["masked"], range(1, 3), B.BehaviourThresholds(), cfg=None)[0]
+    asked_steps.clear()
+    row = planner_behaviour.planner_rows(["masked"], range(1, 3), B.BehaviourThresholds(), cfg=None, steps=3)[0]
     assert row["walk"] == "0/2" and [s["seed"] for s in row["seeds"]] == [1, 2]
+    assert asked_steps == {3}
     assert {seed for _, _, seed, _ in asked} == {1, 2}
