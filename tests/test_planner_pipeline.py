@@ -463,24 +463,33 @@ def test_init_from_fine_tunes_a_trained_planner(runs, tmp_path, capsys):
     assert "no model.safetensors there" in capsys.readouterr().err
 
 
-def test_ar_training_recipe_parses_and_matches_the_shipped_ar_planner():
-    """models/planner_ar_train.json (passed with --config by models/train_default_models.sh)
-    parses into valid configs, and every field it sets is what the shipped AR planner's
-    config.json records it was trained with (checked only when that planner is there)."""
+@pytest.mark.parametrize("recipe_file, kind", [("planner_ar_train.json", "ar"),
+                                               ("planner_masked_finetune.json", "masked")])
+def test_training_recipe_parses_and_matches_the_shipped_planner(recipe_file, kind):
+    """The recipes models/train_default_models.sh passes with --config (the AR planner's, and the
+    masked planner's balanced fine-tune, run with --init-from) parse into valid configs, and every
+    field they set is what the shipped planner's config.json records it was trained with (checked
+    only when that planner is there). A fine-tune recipe holds a 'train' section only, and the
+    shipped masked planner records the run it was fine-tuned from."""
     from pathlib import Path
 
     from motok_robot.planner.config import PlannerConfig, planner_config_from_dict, to_dict, train_config_from_dict
 
     models = Path(__file__).resolve().parents[1] / "models"
-    recipe = json.loads((models / "planner_ar_train.json").read_text())
+    recipe = json.loads((models / recipe_file).read_text())
     assert set(recipe) <= {"planner", "train"}
-    planner_config_from_dict({**to_dict(PlannerConfig(kind="ar")), **recipe.get("planner", {})})
-    train_config_from_dict(recipe.get("train", {})).validate("ar")
-    shipped = models / "planner_ar" / "config.json"
+    planner_config_from_dict({**to_dict(PlannerConfig(kind=kind)), **recipe.get("planner", {})})
+    train_config_from_dict(recipe.get("train", {})).validate(kind)
+    fine_tune = kind == "masked"
+    if fine_tune:
+        assert set(recipe) == {"train"}, "--init-from takes the architecture from the run it starts from"
+    shipped = models / f"planner_{kind}" / "config.json"
     if not shipped.is_file():
-        pytest.skip(f"no shipped AR planner in {shipped.parent}")
+        pytest.skip(f"no shipped {kind} planner in {shipped.parent}")
     saved = json.loads(shipped.read_text())
-    assert saved["planner"]["kind"] == "ar"
+    assert saved["planner"]["kind"] == kind
     for section, values in recipe.items():
         for key, value in values.items():
             assert saved[section][key] == value, f"{shipped}: {section}.{key} is {saved[section][key]!r}, recipe {value!r}"
+    if fine_tune:
+        assert len(saved["init_from"]["sha256"]) == 16
