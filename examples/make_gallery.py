@@ -78,11 +78,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--width", type=int, default=320)
     parser.add_argument("--only", nargs="+", default=None, choices=sorted(PROMPTS))
     args = parser.parse_args(argv)
+    motok_robot = motok_robot_command()
     for name in args.only or PROMPTS:
         run_dir = args.out / name
         text, extra, length = PROMPTS[name]
         seconds = [] if length == "estimated" else ["--seconds", str(args.seconds)]
-        cmd = [motok_robot_command(), "run", text, "--robot", args.robot, *seconds, "--out", str(run_dir), "--overwrite", *extra]
+        cmd = [motok_robot, "run", text, "--robot", args.robot, *seconds, "--out", str(run_dir), "--overwrite", *extra]
         print("$", " ".join(cmd), flush=True)
         # a failing validation exits non-zero but still writes the video: that is gallery material too
         subprocess.run(cmd, check=False)

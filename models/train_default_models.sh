@@ -67,14 +67,10 @@ fi
 # sampling" and "The AR planner retrained with balanced sampling".
 motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind masked \
   --out "$WORK/planner_masked" "${DEV[@]}" $(resume_flag "$WORK/planner_masked")
-if [ -f "$WORK/planner_masked_balanced/config.json" ]; then
-  motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind masked \
-    --out "$WORK/planner_masked_balanced" --resume "${DEV[@]}"
-else
-  motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind masked \
-    --init-from "$WORK/planner_masked" --config models/planner_masked_finetune.json \
-    --out "$WORK/planner_masked_balanced" "${DEV[@]}"
-fi
+FINETUNE=(--init-from "$WORK/planner_masked" --config models/planner_masked_finetune.json)
+if [ -f "$WORK/planner_masked_balanced/config.json" ]; then FINETUNE=(--resume); fi
+motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind masked \
+  --out "$WORK/planner_masked_balanced" "${FINETUNE[@]}" "${DEV[@]}"
 motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind ar \
   --config models/planner_ar_train.json --out "$WORK/planner_ar" "${DEV[@]}" $(resume_flag "$WORK/planner_ar")
 motok-robot train evaluator --data "$PREPARED" --out "$WORK/evaluator" "${DEV[@]}" $(resume_flag "$WORK/evaluator")
