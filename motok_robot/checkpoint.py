@@ -63,25 +63,26 @@ def read_run_config(run_dir: str | Path, *, stage: str, fmt: str, version: int, 
     return data
 
 
-def load_checked_weights(model: torch.nn.Module, weights: Path) -> None:
+def load_checked_weights(model: torch.nn.Module, weights: Path, may_lack: tuple[str, ...] = ()) -> None:
     """Load the safetensors file ``weights`` into ``model`` (strict: same names and shapes).
 
-    Raises InputError naming the file (and the tensor) when it cannot be read or does not match
-    the model built from ``config.json``.
+    ``may_lack``: name prefixes of tensors the file may lack; those keep the model's values (a
+    module added to a trained model for a fine-tune).  Raises InputError naming the file (and the
+    tensor) when it cannot be read or does not match the model built from ``config.json``.
     """
     try:
         state = load_file(str(weights))
     except (SafetensorError, OSError) as exc:
         raise InputError(f"{weights}: cannot read safetensors file ({exc})") from None
     expected = model.state_dict()
-    missing = sorted(set(expected) - set(state))
+    missing = sorted(k for k in set(expected) - set(state) if not k.startswith(may_lack))
     unexpected = sorted(set(state) - set(expected))
     if missing or unexpected:
         raise InputError(f"{weights}: weights do not match {CONFIG_FILE} (missing {missing[:5]}, unexpected {unexpected[:5]})")
     for key, value in state.items():
         if value.shape != expected[key].shape:
             raise InputError(f"{weights}: tensor {key} has shape {tuple(value.shape)}, config expects {tuple(expected[key].shape)}")
-    model.load_state_dict(state)
+    model.load_state_dict(state, strict=not may_lack)
 
 
 def save_training_state(path: str | Path, model: torch.nn.Module, optimiser: torch.optim.Optimizer, step: int, extra: dict[str, torch.Tensor] | None = None) -> None:

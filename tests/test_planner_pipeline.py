@@ -456,11 +456,60 @@ def test_init_from_fine_tunes_a_trained_planner(runs, tmp_path, capsys):
     assert "is a 'masked' planner run, not 'ar'" in capsys.readouterr().err
     assert main(base + ["--init-from", str(runs / "masked"), "--out", str(tmp_path / "arch"),
                         "--config", str(runs / "tiny.json")]) == 2
-    assert "remove the 'planner' section" in capsys.readouterr().err
+    assert "the architecture comes from that run" in capsys.readouterr().err
     assert main(base + ["--init-from", str(runs / "masked"), "--out", str(tmp_path / "moved"), "--resume"]) == 2
     assert "cannot be combined with --resume" in capsys.readouterr().err
     assert main(base + ["--init-from", str(tmp_path / "nowhere"), "--out", str(tmp_path / "none")]) == 2
     assert "no model.safetensors there" in capsys.readouterr().err
+
+
+def test_init_from_can_switch_on_the_end_embedding(runs, tmp_path, capsys):
+    """A fine-tune may switch on ``end_embedding``: the run records it, every trained tensor comes
+    from the named run and the new embedding starts at zero, so with a zero learning rate the
+    fine-tuned planner gives the named planner's logits; with some learning rate the embedding
+    learns. Any other 'planner' key, switching it off, and the AR planner are refused."""
+    from safetensors.torch import load_file
+
+    from motok_robot.planner.checkpoint import load_planner
+    from motok_robot.planner.conditions import Conditions
+
+    base = ["train", "planner", "--data", str(runs / "data"), "--tokenizer", str(runs / "tok"), "--kind", "masked",
+            "--val-every", "2", "--seed", "3", "--steps", "2", "--init-from", str(runs / "masked")]
+
+    def recipe(name, lr, planner):
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps({"planner": planner, "train": {"lr": lr, "warmup_steps": 1, "batch_size": 4,
+                                                                   "val_batches": 2}}))
+        return ["--config", str(path), "--out", str(tmp_path / name)]
+
+    assert main(base + recipe("frozen", 0.0, {"end_embedding": True})) == 0
+    start = load_file(str(runs / "masked" / "model.safetensors"))
+    frozen = load_file(str(tmp_path / "frozen" / "model.safetensors"))
+    assert set(frozen) - set(start) == {"end_embedding.weight"}
+    assert all(torch.equal(start[k], frozen[k]) for k in start)
+    assert not frozen["end_embedding.weight"].any()
+    saved = json.loads((tmp_path / "frozen" / "config.json").read_text())
+    assert saved["planner"]["end_embedding"] is True
+    assert {**saved["planner"], "end_embedding": False} == json.loads((runs / "masked" / "config.json").read_text())["planner"]
+    (before, _), (after, _) = load_planner(runs / "masked"), load_planner(tmp_path / "frozen")
+    before.eval(), after.eval()
+    tokens = torch.tensor([[3, before.mask_id, 5, 7, before.mask_id, 1]])
+    cond = Conditions(text_embedding=torch.randn(1, before.config.text_dim, generator=torch.Generator().manual_seed(0)))
+    with torch.no_grad():
+        assert torch.allclose(before.logits(tokens, torch.tensor([6]), cond), after.logits(tokens, torch.tensor([6]), cond))
+
+    assert main(base + recipe("learns", 0.01, {"end_embedding": True})) == 0
+    assert load_file(str(tmp_path / "learns" / "model.safetensors"))["end_embedding.weight"].any()
+    # the end embedding is not switched off again, or anything else changed
+    capsys.readouterr()
+    assert main(base[:-1] + [str(tmp_path / "learns")] + recipe("off", 0.0, {"end_embedding": False})) == 2
+    assert "end_embedding can only be switched on" in capsys.readouterr().err
+    assert main(base + recipe("wider", 0.0, {"end_embedding": True, "width": 64})) == 2
+    err = capsys.readouterr().err
+    assert "remove width from the 'planner' section" in err and "may only switch on end_embedding" in err
+    as_ar = ["ar" if a == "masked" else a for a in base[:-1]] + [str(runs / "ar")]
+    assert main(as_ar + recipe("ar", 0.0, {"end_embedding": True})) == 2
+    assert "end_embedding is for the masked planner" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("recipe_file, kind", [("planner_ar_train.json", "ar"),
@@ -469,11 +518,12 @@ def test_training_recipe_parses_and_matches_the_shipped_planner(recipe_file, kin
     """The recipes models/train_default_models.sh passes with --config (the AR planner's, and the
     masked planner's balanced fine-tune, run with --init-from) parse into valid configs, and every
     field they set is what the shipped planner's config.json records it was trained with (checked
-    only when that planner is there). A fine-tune recipe holds a 'train' section only, and the
-    shipped masked planner records the run it was fine-tuned from."""
+    only when that planner is there). A fine-tune recipe's 'planner' section only switches on what
+    a fine-tune may add, and the shipped masked planner records the run it was fine-tuned from."""
     from pathlib import Path
 
     from motok_robot.planner.config import PlannerConfig, planner_config_from_dict, to_dict, train_config_from_dict
+    from motok_robot.planner.train import SWITCHES_ON_INIT
 
     models = Path(__file__).resolve().parents[1] / "models"
     recipe = json.loads((models / recipe_file).read_text())
@@ -482,7 +532,7 @@ def test_training_recipe_parses_and_matches_the_shipped_planner(recipe_file, kin
     train_config_from_dict(recipe.get("train", {})).validate(kind)
     fine_tune = kind == "masked"
     if fine_tune:
-        assert set(recipe) == {"train"}, "--init-from takes the architecture from the run it starts from"
+        assert set(recipe.get("planner", {})) <= set(SWITCHES_ON_INIT), "--init-from takes the architecture from its run"
     shipped = models / f"planner_{kind}" / "config.json"
     if not shipped.is_file():
         pytest.skip(f"no shipped {kind} planner in {shipped.parent}")

@@ -94,7 +94,8 @@ def train_planner(
     ``init_from`` names a trained planner run to start from (fine-tuning): its architecture, text
     encoder and weights are taken, the optimiser and the learning-rate schedule start afresh with
     this run's training settings, and the tokenizer and action labels must be the ones it was
-    trained with."""
+    trained with.  ``planner_overrides`` may then only switch on the modules of
+    :data:`SWITCHES_ON_INIT`, which start at zero."""
     from motok_robot.text import load_text_encoder
     from motok_robot.tokenizer import load_tokenizer
 
@@ -118,7 +119,7 @@ def train_planner(
         config = PlannerConfig(kind=kind)
         train_cfg = PlannerTrainConfig()
         if init_from is not None:
-            init_saved, config = _init_run_config(init_from, kind, planner_overrides, text_encoder)
+            init_saved, config, added = _init_run_config(init_from, kind, planner_overrides, text_encoder)
         elif planner_overrides:
             config = planner_config_from_dict({**to_dict(config), **planner_overrides, "kind": kind})
         if train_overrides:
@@ -179,7 +180,11 @@ def train_planner(
     draw_p = train_data.sampling_probabilities(train_cfg.balance_groups)
     model = build_planner(config).to(dev)
     if init_from is not None:
-        load_checked_weights(model, Path(init_from) / WEIGHTS_FILE)
+        with torch.no_grad():  # switched-on modules start at zero: the fine-tune starts from the named model
+            for name, param in model.named_parameters():
+                if name.startswith(added):
+                    param.zero_()
+        load_checked_weights(model, Path(init_from) / WEIGHTS_FILE, may_lack=added)
     decay = [p for n, p in model.named_parameters() if p.dim() >= 2]
     no_decay = [p for n, p in model.named_parameters() if p.dim() < 2]
     optimiser = torch.optim.AdamW([{"params": decay, "weight_decay": train_cfg.weight_decay},
@@ -259,9 +264,16 @@ def train_planner(
     return out
 
 
+#: Architecture switches a fine-tune (``--init-from``) may turn on, each with the name prefix of the
+#: parameters it adds.  Those start at zero, so the fine-tune starts from exactly the named model.
+SWITCHES_ON_INIT = {"end_embedding": "end_embedding."}
+
+
 def _init_run_config(init_from: str | Path, kind: str, planner_overrides: dict | None,
-                     text_encoder: str | None) -> tuple[dict, PlannerConfig]:
-    """The run config and architecture of the planner run ``--init-from`` names, checked for a fine-tune."""
+                     text_encoder: str | None) -> tuple[dict, PlannerConfig, tuple[str, ...]]:
+    """The run config and architecture of the planner run ``--init-from`` names, checked for a
+    fine-tune, with the switches of :data:`SWITCHES_ON_INIT` the ``planner`` overrides turn on;
+    also the name prefixes of the parameters those add."""
     init_from = Path(init_from)
     if not (init_from / WEIGHTS_FILE).is_file():
         raise InputError(f"--init-from {init_from}: no {WEIGHTS_FILE} there (expected a trained planner run directory)")
@@ -269,12 +281,23 @@ def _init_run_config(init_from: str | Path, kind: str, planner_overrides: dict |
     config = saved_planner_config(saved["planner"], where=f"{init_from / CONFIG_FILE} 'planner'")
     if config.kind != kind:
         raise InputError(f"--init-from {init_from} is a {config.kind!r} planner run, not {kind!r}")
-    if planner_overrides:
-        raise InputError(f"--init-from {init_from}: the architecture comes from that run; remove the 'planner' section "
-                         f"({', '.join(sorted(planner_overrides))}) from --config")
+    overrides = dict(planner_overrides or {})
+    other = sorted(k for k in overrides if k not in SWITCHES_ON_INIT)
+    if other:
+        raise InputError(f"--init-from {init_from}: the architecture comes from that run; remove {', '.join(other)} "
+                         f"from the 'planner' section of --config (a fine-tune may only switch on "
+                         f"{', '.join(SWITCHES_ON_INIT)})")
+    added = []
+    for key, value in overrides.items():
+        if value is not True and value != getattr(config, key):
+            raise InputError(f"--init-from {init_from}: 'planner' {key} can only be switched on (true) in a fine-tune "
+                             f"(that run has {getattr(config, key)!r}, --config asks for {value!r})")
+        if value is True and not getattr(config, key):
+            added.append(SWITCHES_ON_INIT[key])
+    config = replace(config, **overrides).validate()
     if text_encoder is not None and text_encoder != config.text_encoder:
         raise InputError(f"--init-from {init_from} was trained with text encoder {config.text_encoder!r}, not {text_encoder!r}")
-    return saved, config
+    return saved, config, tuple(added)
 
 
 def init_record(init_from: str | Path) -> dict[str, str]:
