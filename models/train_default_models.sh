@@ -59,18 +59,19 @@ if [ "${TOKENIZER_STAGE2:-0}" = 1 ]; then
       --freeze-tokens --config models/tokenizer_finetune.json "${DEV[@]}"
   fi
 fi
-# The masked planner is trained with the config defaults, then fine-tuned for 1,500 steps with
-# balanced sampling (models/planner_masked_finetune.json: balance_groups 0.5, rare actions such
-# as the 28 bows drawn more often; learning rate 1e-4), which is the shipped one. The AR planner's
-# recipe is models/planner_ar_train.json: 6 layers, four token grids per clip and balance_groups
-# 0.5 from the start. See models/MODEL_CARD.md, "The masked planner fine-tuned with balanced
-# sampling" and "The AR planner retrained with balanced sampling".
+# The masked planner is trained with the config defaults, then fine-tuned for 1,500 steps
+# (models/planner_masked_finetune.json: balanced sampling, balance_groups 0.5, so rare actions
+# such as the 28 bows are drawn more often; the end embedding switched on, starting at zero;
+# learning rate 1e-4), which is the shipped one. The AR planner's recipe is
+# models/planner_ar_train.json: 6 layers, four token grids per clip and balance_groups 0.5 from
+# the start. See models/MODEL_CARD.md, "The masked planner fine-tuned with balanced sampling and
+# the end embedding" and "The AR planner retrained with balanced sampling".
 motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind masked \
   --out "$WORK/planner_masked" "${DEV[@]}" $(resume_flag "$WORK/planner_masked")
 FINETUNE=(--init-from "$WORK/planner_masked" --config models/planner_masked_finetune.json)
-if [ -f "$WORK/planner_masked_balanced/config.json" ]; then FINETUNE=(--resume); fi
+if [ -f "$WORK/planner_masked_finetune/config.json" ]; then FINETUNE=(--resume); fi
 motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind masked \
-  --out "$WORK/planner_masked_balanced" "${FINETUNE[@]}" "${DEV[@]}"
+  --out "$WORK/planner_masked_finetune" "${FINETUNE[@]}" "${DEV[@]}"
 motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind ar \
   --config models/planner_ar_train.json --out "$WORK/planner_ar" "${DEV[@]}" $(resume_flag "$WORK/planner_ar")
 motok-robot train evaluator --data "$PREPARED" --out "$WORK/evaluator" "${DEV[@]}" $(resume_flag "$WORK/evaluator")
@@ -79,7 +80,7 @@ motok-robot train evaluator --data "$PREPARED" --out "$WORK/evaluator" "${DEV[@]
 for name in tokenizer planner_masked planner_ar evaluator; do
   run=$name
   if [ "$name" = tokenizer ]; then run=$TOKENIZER_RUN; fi
-  if [ "$name" = planner_masked ]; then run=planner_masked_balanced; fi
+  if [ "$name" = planner_masked ]; then run=planner_masked_finetune; fi
   mkdir -p "models/$name"
   for f in config.json model.safetensors metrics.csv training.json; do
     if [ -f "$WORK/$run/$f" ]; then cp "$WORK/$run/$f" "models/$name/$f"; fi
