@@ -27,7 +27,8 @@ def register(commands, groups) -> None:
     train.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
     train.add_argument("--init-from", type=Path, default=None,
                        help="start from this trained planner run's weights and architecture (fine-tuning; "
-                            "fresh optimiser and schedule, same tokenizer and action labels)")
+                            "fresh optimiser and schedule, same tokenizer and action labels; --config's "
+                            "'planner' section may only switch on end_embedding)")
     train.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
     train.add_argument("--steps", type=int, default=None, help="optimiser steps in total (default 5000)")
     train.add_argument("--batch-size", type=int, default=None, help="clips per batch (default 32)")
