@@ -109,10 +109,13 @@ def test_guided_logits_formula():
     assert torch.allclose(guided_logits(c, u, 3.0), u + 3.0 * (c - u), atol=1e-6)
 
 
-@pytest.mark.parametrize("every", [False, True])
-def test_autoregressive_logits_are_causal(every):
+@pytest.mark.parametrize("every, end", [(False, False), (True, False), (False, True)])
+def test_autoregressive_logits_are_causal(every, end):
     torch.manual_seed(1)
-    model = ARPlanner(tiny("ar", global_every_position=every)).eval()
+    model = ARPlanner(tiny("ar", global_every_position=every, end_embedding=end)).eval()
+    if end:  # a trained (non-zero) end embedding; the length is a condition, not a later token
+        with torch.no_grad():
+            model.end_embedding.weight.normal_()
     with torch.no_grad():  # make the (zero-initialised) local path active
         for p in model.local_encoder.out.parameters():
             p.normal_()
@@ -123,25 +126,32 @@ def test_autoregressive_logits_are_causal(every):
     for i in (0, 3, 7, N - 2):
         b = a.clone()
         b[:, i + 1:] = torch.randint(0, K, (1, N - i - 1))
-        la, lb = model.logits(a, cond, N), model.logits(b, cond, N)
+        length = torch.tensor([N]) if end else None
+        la, lb = model.logits(a, cond, N, lengths=length), model.logits(b, cond, N, lengths=length)
         # output j predicts token j (0-based) from tokens < j: outputs 0..i+1 only see tokens 0..i
         assert torch.allclose(la[:, : i + 2], lb[:, : i + 2], atol=1e-5), i
         assert not torch.allclose(la[:, i + 2:], lb[:, i + 2:], atol=1e-5)
 
 
-@pytest.mark.parametrize("every", [False, True])
+@pytest.mark.parametrize("every, end", [(False, False), (True, False), (False, True)])
 @pytest.mark.parametrize("cfg_scale", [1.0, 2.5])
-def test_ar_cached_sampling_matches_full_logits(every, cfg_scale):
+def test_ar_cached_sampling_matches_full_logits(every, end, cfg_scale):
     """Greedy sampling with the key/value cache picks, at every position, the argmax of the full
-    (uncached) forward pass on the tokens it drew: both paths condition each token the same way."""
+    (uncached) forward pass on the tokens it drew: both paths condition each token the same way
+    (with ``end_embedding``, on the count of tokens still to draw)."""
     torch.manual_seed(3)
-    model = ARPlanner(tiny("ar", global_every_position=every)).eval()
+    model = ARPlanner(tiny("ar", global_every_position=every, end_embedding=end)).eval()
+    if end:
+        with torch.no_grad():
+            model.end_embedding.weight.normal_()
     cond = Conditions(text_embedding=torch.randn(2, D))
     tokens = model.plan(cond, n_tokens=10, seed=0, cfg_scale=cfg_scale, temperature=0.0)
+    length = torch.tensor([10, 10]) if end else None
     with torch.no_grad():
-        logits = model.logits(tokens, cond)[:, :10]
+        logits = model.logits(tokens, cond, lengths=length)[:, :10]
         if cfg_scale != 1.0:
-            logits = guided_logits(logits, model.logits(tokens, cond.without_global())[:, :10], cfg_scale)
+            logits = guided_logits(logits, model.logits(tokens, cond.without_global(), lengths=length)[:, :10],
+                                   cfg_scale)
     logits[..., model.end_id] = float("-inf")
     assert torch.equal(logits.argmax(-1), tokens)
 
@@ -389,8 +399,6 @@ def test_end_embedding_tells_the_masked_planner_where_the_motion_ends():
     """Each token gets the embedding of its distance to the end (``ends`` False, a crop that stops
     mid-clip: the "end unknown" entry), and a tiny planner with it learns sequences of 5-12 tokens
     that end with code 2 after codes 1, at every length."""
-    with pytest.raises(InputError, match="end_embedding is for the masked planner"):
-        PlannerConfig(kind="ar", end_embedding=True).validate()
     torch.manual_seed(0)
     model = build_planner(tiny("masked", token_conv_kernel=0, end_embedding=True))
     seen = []
@@ -416,3 +424,41 @@ def test_end_embedding_tells_the_masked_planner_where_the_motion_ends():
     model.eval()
     planned = model.plan(cond, lengths, seed=0, temperature=0.0, cfg_scale=1.0, steps=1)
     assert torch.equal(planned, _expected(tokens, lengths))
+
+
+def test_end_embedding_tells_the_ar_planner_how_many_tokens_are_left():
+    """The position that predicts token ``i`` (1-based) gets the count of tokens still to draw,
+    ``length - i + 1`` (0 at the [END] position; "end unknown" for a crop that stops mid-clip or
+    when no length is given), and a tiny AR planner with it learns sequences of 5-12 tokens that
+    end with code 2 after codes 1: asked for a length, it draws the 2 exactly at the end, which
+    the position embedding alone cannot tell it (the text is the same for every length)."""
+    torch.manual_seed(0)
+    model = build_planner(tiny("ar", end_embedding=True))
+    seen = []
+    model.end_embedding.register_forward_hook(lambda module, args, out: seen.append(args[0].clone()))
+    cond = Conditions(text_embedding=torch.ones(2, D))
+    model.logits(torch.zeros(2, 5, dtype=torch.long), cond, lengths=torch.tensor([3, 5]), ends=torch.tensor([True, False]))
+    unknown = model.config.max_tokens + 1
+    assert seen[0].tolist() == [[3, 2, 1, 0, 0, 0], [unknown] * 6]
+    model.logits(torch.zeros(1, 2, dtype=torch.long), cond.select(torch.tensor([0])))
+    assert seen[1].tolist() == [[unknown] * 3]
+
+    lengths = torch.arange(5, 13)
+    tokens = torch.ones(len(lengths), 12, dtype=torch.long)
+    tokens[torch.arange(len(lengths)), lengths - 1] = 2
+    cond = Conditions(text_embedding=torch.ones(len(lengths), D))
+    opt = torch.optim.Adam(model.parameters(), lr=3e-3)
+    gen = torch.Generator().manual_seed(0)
+    for _ in range(200):
+        loss = model.loss(tokens, lengths, cond, gen)["loss"]
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    model.eval()
+    planned = model.plan(cond, lengths, seed=0, temperature=0.0, cfg_scale=1.0)
+    assert torch.equal(planned, _expected(tokens, lengths))
+    # the same planner without its end embedding's help (all "unknown") cannot place the 2
+    del seen[:]
+    blind = model.plan(cond, None, seed=0, temperature=0.0, cfg_scale=1.0)
+    assert all((row == unknown).all() for row in seen)
+    assert not torch.equal(blind, _expected(tokens, lengths)[:, : blind.shape[1]])

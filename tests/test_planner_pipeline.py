@@ -467,7 +467,7 @@ def test_init_from_can_switch_on_the_end_embedding(runs, tmp_path, capsys):
     """A fine-tune may switch on ``end_embedding``: the run records it, every trained tensor comes
     from the named run and the new embedding starts at zero, so with a zero learning rate the
     fine-tuned planner gives the named planner's logits; with some learning rate the embedding
-    learns. Any other 'planner' key, switching it off, and the AR planner are refused."""
+    learns; the same for the AR planner. Any other 'planner' key, and switching it off, are refused."""
     from safetensors.torch import load_file
 
     from motok_robot.planner.checkpoint import load_planner
@@ -507,9 +507,15 @@ def test_init_from_can_switch_on_the_end_embedding(runs, tmp_path, capsys):
     assert main(base + recipe("wider", 0.0, {"end_embedding": True, "width": 64})) == 2
     err = capsys.readouterr().err
     assert "remove width from the 'planner' section" in err and "may only switch on end_embedding" in err
+    # the AR planner too: zero embedding, the named run's logits
     as_ar = ["ar" if a == "masked" else a for a in base[:-1]] + [str(runs / "ar")]
-    assert main(as_ar + recipe("ar", 0.0, {"end_embedding": True})) == 2
-    assert "end_embedding is for the masked planner" in capsys.readouterr().err
+    assert main(as_ar + recipe("ar", 0.0, {"end_embedding": True})) == 0
+    (before, _), (after, _) = load_planner(runs / "ar"), load_planner(tmp_path / "ar")
+    before.eval(), after.eval()
+    assert after.config.end_embedding and not after.end_embedding.weight.any()
+    with torch.no_grad():
+        assert torch.allclose(before.logits(tokens[:, :4].clamp(max=5), cond),
+                              after.logits(tokens[:, :4].clamp(max=5), cond, lengths=torch.tensor([4])))
 
 
 @pytest.mark.parametrize("recipe_file, kind", [("planner_ar_train.json", "ar"),
@@ -543,3 +549,28 @@ def test_training_recipe_parses_and_matches_the_shipped_planner(recipe_file, kin
             assert saved[section][key] == value, f"{shipped}: {section}.{key} is {saved[section][key]!r}, recipe {value!r}"
     if fine_tune:
         assert len(saved["init_from"]["sha256"]) == 16
+
+def test_ar_end_embedding_trains_with_some_ends_unknown(runs, tmp_path):
+    """An AR planner with ``end_embedding`` trains through the command path; its run records the
+    kind's default ``end_unknown_prob`` (0.1: some samples learn [END] without a given length;
+    0 for the masked planner), and a value outside [0, 1] is refused by name."""
+    from motok_robot.errors import InputError
+    from motok_robot.planner.checkpoint import load_planner
+    from motok_robot.planner.conditions import Conditions
+    from motok_robot.planner.config import PlannerTrainConfig
+    from motok_robot.planner.train import train_planner
+
+    assert PlannerTrainConfig().validate("ar").end_unknown_prob == 0.1
+    assert PlannerTrainConfig().validate("masked").end_unknown_prob == 0.0
+    with pytest.raises(InputError, match=r"end_unknown_prob must be in \[0, 1\]"):
+        PlannerTrainConfig(end_unknown_prob=1.5).validate("ar")
+    out = train_planner(runs / "data", runs / "tok", "ar", tmp_path / "ar_end", seed=1,
+                        planner_overrides={**TINY_PLANNER["planner"], "end_embedding": True},
+                        train_overrides={**TINY_PLANNER["train"], "steps": 3, "val_every": 3, "lr": 0.01})
+    saved = json.loads((out / "config.json").read_text())
+    assert saved["planner"]["end_embedding"] is True and saved["train"]["end_unknown_prob"] == 0.1
+    model, _ = load_planner(out)
+    assert model.end_embedding.weight.std() > 0
+    cond = Conditions(text_embedding=torch.randn(1, model.config.text_dim, generator=torch.Generator().manual_seed(0)))
+    planned = model.eval().plan(cond, 7, seed=0)
+    assert planned.shape == (1, 7) and bool((planned >= 0).all())

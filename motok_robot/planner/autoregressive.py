@@ -30,6 +30,24 @@ class ARPlanner(Planner):
     def __init__(self, config: PlannerConfig) -> None:
         super().__init__(config)
         self.head = nn.Linear(config.width, config.codebook_size + 1)
+        # tokens still to draw at a position, 0 .. max_tokens (0: the [END] position), and
+        # max_tokens + 1 = "the end is unknown" (a crop that stops mid-clip, or no length given)
+        self.end_embedding = nn.Embedding(config.max_tokens + 2, config.width) if config.end_embedding else None
+
+    @property
+    def unknown_end(self) -> int:
+        """The end embedding's "end unknown" entry."""
+        return self.config.max_tokens + 1
+
+    def _to_draw(self, lengths: torch.Tensor, positions: int, ends: torch.Tensor | None) -> torch.Tensor:
+        """``[B, positions]`` indices of the end embedding: at sequence position ``i`` (which
+        predicts token ``i + 1`` or [END]) ``length - i`` tokens are still to draw; past the
+        length (padding, never a target) 0; "unknown" where ``ends`` is False."""
+        position = torch.arange(positions, device=lengths.device)[None]
+        to_draw = (lengths[:, None] - position).clamp(min=0)
+        if ends is not None:
+            to_draw = torch.where(ends.to(lengths.device)[:, None], to_draw, torch.full_like(to_draw, self.unknown_end))
+        return to_draw
 
     @property
     def end_id(self) -> int:
@@ -40,9 +58,12 @@ class ARPlanner(Planner):
         return self.config.codebook_size + 1
 
     def logits(self, tokens: torch.Tensor, cond: Conditions, n_local: int | None = None,
-               drop: torch.Tensor | None = None) -> torch.Tensor:
+               drop: torch.Tensor | None = None, lengths: torch.Tensor | None = None,
+               ends: torch.Tensor | None = None) -> torch.Tensor:
         """``tokens [B, L]`` (inputs ``z_1..z_L``) -> logits ``[B, L + 1, K + 1]``; output ``i``
-        predicts token ``i + 1`` (1-based) or [END]. ``n_local``: tokens the local conditions cover."""
+        predicts token ``i + 1`` (1-based) or [END]. ``n_local``: tokens the local conditions cover.
+        ``lengths [B]``, ``ends [B]`` bool: only planners with ``end_embedding`` use them (each
+        sample's token count, and whether the motion ends there; no lengths = end unknown)."""
         b, length = tokens.shape
         g = self.global_encoder(cond, drop)
         embedded = self.token_embedding(tokens)
@@ -56,6 +77,12 @@ class ARPlanner(Planner):
             upto = min(length + 1, n_local)
             seq = torch.cat([seq[:, :upto] + m_s[:, :upto], seq[:, upto:]], dim=1)
         seq = seq + self.position_embedding[: length + 1]
+        if self.end_embedding is not None:
+            if lengths is None:
+                to_draw = torch.full((b, length + 1), self.unknown_end, dtype=torch.long, device=tokens.device)
+            else:
+                to_draw = self._to_draw(lengths.to(tokens.device), length + 1, ends)
+            seq = seq + self.end_embedding(to_draw)
         return self.head(self.transformer(seq))
 
     def loss(self, tokens, lengths, cond, generator, drop=None, ends=None, corruption: float = 0.0):
@@ -79,7 +106,7 @@ class ARPlanner(Planner):
         ends = torch.ones(b, dtype=torch.bool, device=device) if ends is None else ends.to(device)
         end_pos = idx == lengths[:, None]
         target = torch.where(end_pos & ends[:, None], torch.full_like(target, self.end_id), target)
-        logits = self.logits(inputs, cond, n, drop)
+        logits = self.logits(inputs, cond, n, drop, lengths, ends)
         loss = F.cross_entropy(logits.reshape(-1, logits.shape[-1]), target.reshape(-1), ignore_index=IGNORE)
         code = (target >= 0) & (target < self.end_id)
         accuracy = (logits.argmax(-1) == target)[code].float().mean()
@@ -119,12 +146,20 @@ class ARPlanner(Planner):
             m_s = self.local_encoder(cond.local, big_n)
             if guide:
                 m_s = torch.cat([m_s, m_s])
+        to_draw = None
+        if self.end_embedding is not None:  # tokens still to draw at each position, or "unknown"
+            to_draw = self._to_draw(n, big_n + 1, None) if fixed_length else \
+                torch.full((b, big_n + 1), self.unknown_end, dtype=torch.long, device=device)
+            if guide:
+                to_draw = torch.cat([to_draw, to_draw])
         cache = self.transformer.new_cache()
         x = g[:, None]
         out = torch.zeros(b, big_n, dtype=torch.long, device=device)
         for i in range(big_n):
             if m_s is not None:
                 x = x + m_s[:, i : i + 1]
+            if to_draw is not None:
+                x = x + self.end_embedding(to_draw[:, i : i + 1])
             h = self.transformer.step(x + self.position_embedding[i], cache)
             logits = self.head(h[:, 0])
             if guide:

@@ -18,6 +18,8 @@ from motok_robot.errors import InputError
 PLANNER_KINDS = ("masked", "ar")
 #: ``PlannerConfig.token_conv_kernel`` of a masked planner when not set
 MASKED_TOKEN_CONV_KERNEL = 5
+#: ``PlannerTrainConfig.end_unknown_prob`` of an AR planner when not set
+AR_END_UNKNOWN_PROB = 0.1
 FORMAT = "motok-planner"
 FORMAT_VERSION = 1
 
@@ -55,10 +57,13 @@ class PlannerConfig:
     #: at the first position, so that late tokens do not have to find the caption through
     #: attention alone.  False = ``M_g`` at the first position only (the runs shipped so far).
     global_every_position: bool = False
-    #: masked planner: add a learned embedding of each token's distance to the sequence end (in
-    #: tokens; a separate "end unknown" entry for training crops that stop mid-clip), so that
-    #: the planner knows where a motion has to be finished.  False = no such embedding (the
-    #: runs shipped so far, whose only sense of the end is the token convolution's padding).
+    #: add a learned embedding of each position's distance to the sequence end (in tokens; a
+    #: separate "end unknown" entry for training crops that stop mid-clip), so that the planner
+    #: knows where a motion has to be finished.  Masked planner: every token gets its distance
+    #: to the last token.  AR planner: the position that predicts token ``i`` (or [END]) gets the
+    #: count of tokens still to draw there, from the length asked for at sampling ("end
+    #: unknown" when it stops at its own [END]).  False = no such embedding (the shipped AR
+    #: planner, and the masked planners before 2026-11-26).
     end_embedding: bool = False
 
     @property
@@ -92,9 +97,6 @@ class PlannerConfig:
         if self.global_every_position and self.kind != "ar":
             raise InputError("planner config: global_every_position is for the AR planner (the masked planner's "
                              "positions all attend to M_g)")
-        if self.end_embedding and self.kind != "masked":
-            raise InputError("planner config: end_embedding is for the masked planner (the AR planner ends with its "
-                             "[END] token)")
         if len(set(self.action_labels)) != len(self.action_labels):
             raise InputError("planner config: action_labels contains duplicates")
         return self
@@ -150,6 +152,11 @@ class PlannerTrainConfig:
     #: 0 = every clip equally often (the shipped runs: 888 "raise the left hand" clips against
     #: 28 bows and 2 kicks); 1 = every group equally often; 0.5 = square-root balancing.
     balance_groups: float = 0.0
+    #: planners with ``end_embedding``: this fraction of the training samples gets the "end
+    #: unknown" entry although its crop ends with the clip, so the AR planner also learns to
+    #: close a motion with [END] when no length is given (``plan(n_tokens=None)``).  None = the
+    #: kind's default: 0.1 for the AR planner, 0 for the masked one (which always plans a length).
+    end_unknown_prob: float | None = None
     val_every: int = 500  #: steps between validation + checkpoint
     #: True: model.safetensors keeps the weights of the validation with the lowest val loss
     #: (early stopping); False: the latest weights. Resuming always continues from the latest
@@ -176,6 +183,10 @@ class PlannerTrainConfig:
             raise InputError("train config: masked_loss_average is for the masked planner")
         if not 0.0 <= self.balance_groups <= 1.0:
             raise InputError(f"train config: balance_groups must be in [0, 1] (got {self.balance_groups})")
+        if self.end_unknown_prob is None:
+            self.end_unknown_prob = AR_END_UNKNOWN_PROB if kind == "ar" else 0.0
+        if not 0.0 <= self.end_unknown_prob <= 1.0:
+            raise InputError(f"train config: end_unknown_prob must be in [0, 1] (got {self.end_unknown_prob})")
         return self
 
 

@@ -227,6 +227,8 @@ def train_planner(
                                                              action_prob=train_cfg.action_prob)
         cond = cond.to(dev)
         drop = torch.rand(len(idx), generator=generator) < train_cfg.cond_drop_prob
+        if config.end_embedding and train_cfg.end_unknown_prob > 0:  # some ends stay unknown (no length given)
+            ends = ends & (torch.rand(len(idx), generator=generator) >= train_cfg.end_unknown_prob)
         out_loss = model.loss(tokens.to(dev), lengths.to(dev), cond, generator, drop=drop.to(dev), ends=ends.to(dev),
                               **loss_options)
         loss = out_loss["loss"]
