@@ -434,6 +434,8 @@ def test_end_embedding_tells_the_ar_planner_how_many_tokens_are_left():
     the position embedding alone cannot tell it (the text is the same for every length)."""
     torch.manual_seed(0)
     model = build_planner(tiny("ar", end_embedding=True))
+    # it starts small, like the position embedding, so no length outweighs the text at first
+    assert float(model.end_embedding.weight.std()) == pytest.approx(0.02, rel=0.2)
     seen = []
     model.end_embedding.register_forward_hook(lambda module, args, out: seen.append(args[0].clone()))
     cond = Conditions(text_embedding=torch.ones(2, D))

@@ -13,7 +13,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from motok_robot.errors import InputError
-from motok_robot.planner.base import Planner
+from motok_robot.planner.base import Planner, end_embedding
 from motok_robot.planner.conditions import Conditions
 from motok_robot.planner.config import PlannerConfig
 from motok_robot.planner.sampling import guided_logits, sample_logits
@@ -32,7 +32,7 @@ class ARPlanner(Planner):
         self.head = nn.Linear(config.width, config.codebook_size + 1)
         # tokens still to draw at a position, 0 .. max_tokens (0: the [END] position), and
         # max_tokens + 1 = "the end is unknown" (a crop that stops mid-clip, or no length given)
-        self.end_embedding = nn.Embedding(config.max_tokens + 2, config.width) if config.end_embedding else None
+        self.end_embedding = end_embedding(config.max_tokens + 2, config.width) if config.end_embedding else None
 
     @property
     def unknown_end(self) -> int:

@@ -18,7 +18,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from motok_robot.errors import InputError
-from motok_robot.planner.base import Planner
+from motok_robot.planner.base import Planner, end_embedding
 from motok_robot.planner.conditions import Conditions
 from motok_robot.planner.config import PlannerConfig
 from motok_robot.planner.sampling import cosine_mask_ratio, guided_logits, gumbel_noise, sample_logits
@@ -36,7 +36,7 @@ class MaskedPlanner(Planner):
         k = config.token_conv_kernel
         self.token_conv = nn.Conv1d(config.width, config.width, k, padding=k // 2) if k else None
         # distance to the end 0 .. max_tokens - 1, and max_tokens = "the end is not in this crop"
-        self.end_embedding = nn.Embedding(config.max_tokens + 1, config.width) if config.end_embedding else None
+        self.end_embedding = end_embedding(config.max_tokens + 1, config.width) if config.end_embedding else None
 
     @property
     def mask_id(self) -> int:
