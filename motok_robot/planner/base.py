@@ -19,7 +19,7 @@ def end_embedding(entries: int, width: int) -> nn.Embedding:
     initialised small like the position embedding: at ``nn.Embedding``'s unit scale (norm about
     ``sqrt(width)``) each length starts as a large random vector that outweighs the text feature
     ``M_g`` (AR planners trained so on the shared data bowed in 3-11 of 48 seeds against 14-23
-    without it, docs/planner.md)."""
+    without it; models/MODEL_CARD.md, "The AR planner with the end embedding")."""
     embedding = nn.Embedding(entries, width)
     nn.init.normal_(embedding.weight, std=0.02)
     return embedding
