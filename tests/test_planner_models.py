@@ -435,7 +435,7 @@ def test_end_embedding_tells_the_ar_planner_how_many_tokens_are_left():
     torch.manual_seed(0)
     model = build_planner(tiny("ar", end_embedding=True))
     # it starts small, like the position embedding, so no length outweighs the text at first
-    assert float(model.end_embedding.weight.std()) == pytest.approx(0.02, rel=0.2)
+    assert float(model.end_embedding.weight.detach().std()) == pytest.approx(0.02, rel=0.2)
     seen = []
     model.end_embedding.register_forward_hook(lambda module, args, out: seen.append(args[0].clone()))
     cond = Conditions(text_embedding=torch.ones(2, D))
