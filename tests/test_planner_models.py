@@ -464,3 +464,37 @@ def test_end_embedding_tells_the_ar_planner_how_many_tokens_are_left():
     blind = model.plan(cond, None, seed=0, temperature=0.0, cfg_scale=1.0)
     assert all((row == unknown).all() for row in seen)
     assert not torch.equal(blind, _expected(tokens, lengths)[:, : blind.shape[1]])
+
+
+def test_end_horizon_hides_counts_beyond_it():
+    """With ``end_horizon`` 3 every count of tokens still to draw above 3 is shown as one entry
+    (4), so the first positions of a long clip look the same whatever its length; near the end
+    the count is exact, and "end unknown" stays its own entry."""
+    model = build_planner(tiny("ar", end_embedding=True, end_horizon=3))
+    seen = []
+    model.end_embedding.register_forward_hook(lambda module, args, out: seen.append(args[0].clone()))
+    cond = Conditions(text_embedding=torch.ones(2, D))
+    model.logits(torch.zeros(2, 7, dtype=torch.long), cond, lengths=torch.tensor([7, 6]), ends=torch.tensor([True, False]))
+    assert seen[0].tolist() == [[4, 4, 4, 4, 3, 2, 1, 0], [model.config.max_tokens + 1] * 8]
+    with torch.no_grad():  # a trained embedding: the first logits differ between lengths 9 and 12 only without a cap
+        model.end_embedding.weight.normal_()
+    model.eval()
+    one = cond.select(torch.tensor([0]))
+    for horizon, same in ((3, True), (0, False)):
+        model.config.end_horizon = horizon
+        a, b = (model.logits(torch.zeros(1, 2, dtype=torch.long), one, lengths=torch.tensor([n]))[:, :3] for n in (9, 12))
+        assert torch.allclose(a, b, atol=1e-6) == same, horizon
+    # sampling with a length shows the same capped counts
+    model.config.end_horizon = 3
+    del seen[:]
+    model.plan(one, n_tokens=6, seed=0)
+    assert torch.cat(seen, dim=1).tolist() == [[4, 4, 4, 3, 2, 1]]
+
+
+def test_end_horizon_is_for_the_ar_planner_with_its_end_embedding():
+    with pytest.raises(InputError, match="end_horizon is for the AR planner"):
+        tiny("masked", end_embedding=True, end_horizon=4).validate()
+    with pytest.raises(InputError, match="end_horizon needs end_embedding"):
+        tiny("ar", end_horizon=4).validate()
+    with pytest.raises(InputError, match="end_horizon must be in"):
+        tiny("ar", end_embedding=True, end_horizon=10_000).validate()

@@ -41,10 +41,13 @@ class ARPlanner(Planner):
 
     def _to_draw(self, lengths: torch.Tensor, positions: int, ends: torch.Tensor | None) -> torch.Tensor:
         """``[B, positions]`` indices of the end embedding: at sequence position ``i`` (which
-        predicts token ``i + 1`` or [END]) ``length - i`` tokens are still to draw; past the
-        length (padding, never a target) 0; "unknown" where ``ends`` is False."""
+        predicts token ``i + 1`` or [END]) ``length - i`` tokens are still to draw (capped at
+        ``end_horizon``); past the length (padding, never a target) 0; "unknown" where ``ends``
+        is False."""
         position = torch.arange(positions, device=lengths.device)[None]
         to_draw = (lengths[:, None] - position).clamp(min=0)
+        if self.config.end_horizon:  # "more than end_horizon to go" is one entry
+            to_draw = to_draw.clamp(max=self.config.end_horizon + 1)
         if ends is not None:
             to_draw = torch.where(ends.to(lengths.device)[:, None], to_draw, torch.full_like(to_draw, self.unknown_end))
         return to_draw

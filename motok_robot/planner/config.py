@@ -65,6 +65,14 @@ class PlannerConfig:
     #: unknown" when it stops at its own [END]).  False = no such embedding (the shipped AR
     #: planner, and the masked planners before 2026-11-26).
     end_embedding: bool = False
+    #: AR planner with ``end_embedding``: counts of tokens still to draw above this all share one entry
+    #: ("more than ``end_horizon`` to go"), so the planner learns where the motion ends only
+    #: once the end is near and cannot read the clip's whole length at the first positions.
+    #: Knowing the exact length from the start let AR planners lean on it in place of the text
+    #: (models/MODEL_CARD.md, "The AR planner with the end embedding").  0 = the exact count
+    #: everywhere (the runs so far).  Not for the masked planner: it attends to every position,
+    #: so it sees the length anyway.
+    end_horizon: int = 0
 
     @property
     def max_tokens(self) -> int:
@@ -97,6 +105,14 @@ class PlannerConfig:
         if self.global_every_position and self.kind != "ar":
             raise InputError("planner config: global_every_position is for the AR planner (the masked planner's "
                              "positions all attend to M_g)")
+        if self.end_horizon and self.kind != "ar":
+            raise InputError("planner config: end_horizon is for the AR planner (the masked planner attends to "
+                             "every position, so it sees the length anyway)")
+        if self.end_horizon and not self.end_embedding:
+            raise InputError("planner config: end_horizon needs end_embedding (it caps the distances that embedding shows)")
+        if not 0 <= self.end_horizon < self.max_tokens - 1:
+            raise InputError(f"planner config: end_horizon must be in 0..{self.max_tokens - 2} (0 = no cap; got "
+                             f"{self.end_horizon})")
         if len(set(self.action_labels)) != len(self.action_labels):
             raise InputError("planner config: action_labels contains duplicates")
         return self
