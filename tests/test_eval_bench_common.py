@@ -223,3 +223,40 @@ def test_planner_behaviour_counts_passes_per_check_and_passes_the_lengths(monkey
     assert row["walk"] == "0/2" and [s["seed"] for s in row["seeds"]] == [1, 2]
     assert asked_steps == {3}
     assert {seed for _, _, seed, _ in asked} == {1, 2}
+
+
+def test_planner_text_reliance_scores_captioned_clips_in_each_condition():
+    """``planner_text_reliance.token_nll`` with a stand-in AR planner that records what it is
+    given: only clips with a caption count (every motion token, no [END]); "other caption" gives
+    each clip the previous clip's text, "none" drops the text, "unknown" clears the ends; uniform
+    logits score log(K + 1) nats per token."""
+    import planner_text_reliance
+    import torch
+
+    from motok_robot.planner.data import PlannerData, TokenisedClip
+
+    K = 6
+    seen = []
+
+    class Recorder:
+        pad_id = K + 1
+
+        def logits(self, tokens, cond, n, drop, lengths, ends):
+            seen.append({"text": cond.text_embedding.clone(), "drop": drop.clone(), "ends": ends.clone(),
+                         "lengths": lengths.clone()})
+            return torch.zeros(tokens.shape[0], n + 1, K + 1)
+
+    table = torch.eye(3)  # caption rows 0, 1, 2
+    clips = [TokenisedClip("a", np.arange(5) % K, np.zeros((20, 263), np.float16), [0], -1),
+             TokenisedClip("b", np.arange(3) % K, np.zeros((12, 263), np.float16), [], 0),  # action label only
+             TokenisedClip("c", np.arange(4) % K, np.zeros((16, 263), np.float16), [1], -1),
+             TokenisedClip("d", np.arange(7) % K, np.zeros((28, 263), np.float16), [2], -1)]
+    data = PlannerData(clips, table, downsample=4, max_tokens=6)
+    nll, count = planner_text_reliance.token_nll(Recorder(), data, "caption", "known", batch_size=8)
+    assert count == 5 + 4 + 6 and nll == pytest.approx(np.log(K + 1))
+    assert torch.equal(seen[-1]["text"], table) and not seen[-1]["drop"].any()
+    assert seen[-1]["lengths"].tolist() == [5, 4, 6] and seen[-1]["ends"].tolist() == [True, True, False]
+    planner_text_reliance.token_nll(Recorder(), data, "other caption", "unknown", batch_size=8)
+    assert torch.equal(seen[-1]["text"], table[[2, 0, 1]]) and not seen[-1]["ends"].any()
+    planner_text_reliance.token_nll(Recorder(), data, "none", "known", batch_size=8)
+    assert seen[-1]["drop"].all()
