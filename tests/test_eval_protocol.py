@@ -159,6 +159,16 @@ def test_protocol_is_deterministic_given_the_seed_and_varies_with_it():
     assert set(a["rows"][2]["metrics"]) == set(METRICS) - {"multimodality"}
 
 
+def test_a_row_does_not_depend_on_the_rows_evaluated_with_it():
+    """Every generator gets the same sampling seeds, so a model evaluated alone, or after another
+    one, gives the same numbers."""
+    clips, sigs = make_clips(40, 4)
+    alone = run_protocol(clips, ToyEmbedder(sigs), {"b": noisy_generator(clips, 0.5)}, CFG, progress=False)
+    second = run_protocol(clips, ToyEmbedder(sigs), {"a": noisy_generator(clips, 0.2), "b": noisy_generator(clips, 0.5)},
+                          CFG, progress=False)
+    assert alone.row("b").metrics == second.row("b").metrics
+
+
 def test_generator_outputs_are_checked_and_restored_to_input_order():
     texts, lengths = ["a", "b", "c", "d", "e"], [50, 41, 60, 41, 45]
     seen = []
