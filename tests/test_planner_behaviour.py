@@ -26,8 +26,8 @@ TH = B.BehaviourThresholds()
 #: over seeds 0-95 are in benchmarks/results/planner_behaviour*.json (python
 #: benchmarks/planner_behaviour.py) and the model card: seed 0 passing says little about a sampler.
 KNOWN_MISSES = {
-    "87b3f8e4454f3fcb": {"bow": "with seed 0 the shipped AR planner bows 46 degrees but comes back only to 19 "
-                                "(the check asks for 15); it bows and comes back up in 47 of seeds 0-95"},
+    "5c9e80ceefcbd3ac": {"bow": "with seed 0 the shipped AR planner bows only 22.6 degrees (the check asks for 30) "
+                                "and straightens up again; it bows and comes back up in 54 of seeds 0-95"},
 }
 
 

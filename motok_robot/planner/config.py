@@ -62,16 +62,16 @@ class PlannerConfig:
     #: knows where a motion has to be finished.  Masked planner: every token gets its distance
     #: to the last token.  AR planner: the position that predicts token ``i`` (or [END]) gets the
     #: count of tokens still to draw there, from the length asked for at sampling ("end
-    #: unknown" when it stops at its own [END]).  False = no such embedding (the shipped AR
-    #: planner, and the masked planners before 2026-11-26).
+    #: unknown" when it stops at its own [END]).  False = no such embedding (the AR planners
+    #: shipped before 2026-11-27, and the masked planners before 2026-11-26).
     end_embedding: bool = False
-    #: AR planner with ``end_embedding``: counts of tokens still to draw above this all share one entry
-    #: ("more than ``end_horizon`` to go"), so the planner learns where the motion ends only
-    #: once the end is near and cannot read the clip's whole length at the first positions.
-    #: Knowing the exact length from the start let AR planners lean on it in place of the text
-    #: (models/MODEL_CARD.md, "The AR planner with the end embedding").  0 = the exact count
-    #: everywhere (the runs so far).  Not for the masked planner: it attends to every position,
-    #: so it sees the length anyway.
+    #: AR planner with ``end_embedding``: counts of tokens still to draw above this all share one
+    #: entry ("more than ``end_horizon`` to go"), so the planner is told where the motion ends
+    #: only once the end is near, not the clip's whole length from the first position.  AR
+    #: planners with the exact count matched texts worse; the shipped one has 8
+    #: (models/MODEL_CARD.md, "The AR planner with a capped end embedding").  0 = the exact count
+    #: everywhere.  Not for the masked planner: it attends to every position, so it sees the
+    #: length anyway.
     end_horizon: int = 0
 
     @property
