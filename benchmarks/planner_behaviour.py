@@ -1,7 +1,7 @@
 """Behaviour pass rates of the planners over many seeds (the tests check seed 0, and floors over 0-7).
 
 Run: python benchmarks/planner_behaviour.py [--planner masked ar] [--seeds 12] [--first-seed 0] [--seconds S|auto]
-       [--cfg S] [--steps N] [--data runs/prepared] [--threads 2]
+       [--cfg S] [--steps N] [--decoder-steps N] [--decoder-seed K] [--data runs/prepared] [--threads 2]
        [--out benchmarks/results/planner_behaviour.json]
 
 For every planner and seed ``F..F+N-1`` (``--first-seed``, default 0) it generates the five prompts of
@@ -10,7 +10,10 @@ walk, wave the right hand, raise both hands, bow and come back up) on the config
 (``models/`` or ``$MOTOK_ROBOT_MODELS``), with the default sampling settings unless ``--cfg`` (guidance scale) or ``--steps``
 (the masked planner's unmasking iterations) is given, at the checks' lengths (6 s for the walk, run and wave; the planner's own length, from its
 length estimator, for raising both hands and bowing); ``--seconds`` sets one length for all (a
-number, or ``auto`` for the planner's own). With ``--data`` (a prepared dataset) the bow and
+number, or ``auto`` for the planner's own). ``--decoder-steps`` sets the tokenizer decoder's DDIM
+steps; ``--decoder-seed K`` decodes every seed's tokens from the noise of seed K instead of the
+seed's own (the tokens stay those of the seed), which separates what the planner's tokens decide
+from what the decoder's noise adds. With ``--data`` (a prepared dataset) the bow and
 raise-both-hands checks also run on the real Bandai Namco clips of those labels, at their own
 lengths, and on the same clips encoded and decoded by the tokenizer: what a planner could reach
 with the best token sequence. Prints a table of passes per check and writes
@@ -36,8 +39,17 @@ REFERENCE = {"bow": ("bow", B.check_bow), "raise-up-both-hands": ("raise_both_ha
 
 
 def planner_rows(planners: list[str], seeds: range, th: B.BehaviourThresholds, cfg: float | None,
-                 steps: int | None = None) -> list[dict]:
+                 steps: int | None = None, decoder_steps: int | None = None,
+                 decoder_seed: int | None = None) -> list[dict]:
     from motok_robot.planner.generate import MotionGenerator
+
+    extra: dict = {}
+    if decoder_steps is not None:
+        extra["decoder_steps"] = decoder_steps
+    if decoder_seed is not None:
+        # the hook gets the clip's own seed (unused here): the noise comes from decoder_seed
+        extra["decode"] = lambda tokenizer, tokens, length, dsteps, _seed: tokenizer.decode(
+            tokens, length=length, steps=dsteps, seed=decoder_seed)
 
     rows = []
     for kind in planners:
@@ -47,7 +59,7 @@ def planner_rows(planners: list[str], seeds: range, th: B.BehaviourThresholds, c
             lengths: dict[str, float] = {}
 
             def make(text: str, seconds: float | None) -> np.ndarray:
-                motion = gen.generate(text, seconds=seconds, seed=seed, cfg_scale=cfg, steps=steps)
+                motion = gen.generate(text, seconds=seconds, seed=seed, cfg_scale=cfg, steps=steps, **extra)
                 lengths[text] = motion.seconds
                 return motion.joints.astype(np.float64)
 
@@ -115,6 +127,10 @@ def main() -> int:
     parser.add_argument("--cfg", type=float, default=None, help="guidance scale (default: the sampling default)")
     parser.add_argument("--steps", type=int, default=None,
                         help="masked planner unmasking iterations (default: the sampling default, 10)")
+    parser.add_argument("--decoder-steps", type=int, default=None,
+                        help="tokenizer decoder DDIM steps (default: the tokenizer's, 20)")
+    parser.add_argument("--decoder-seed", type=int, default=None,
+                        help="decode every seed's tokens from this noise seed (default: the seed's own)")
     parser.add_argument("--data", type=Path, default=None, help="prepared dataset for the real-clip reference row")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/planner_behaviour.json"))
@@ -125,6 +141,10 @@ def main() -> int:
         parser.error("--first-seed must be >= 0")
     if args.steps is not None and args.steps < 1:
         parser.error("--steps must be >= 1")
+    if args.decoder_steps is not None and args.decoder_steps < 1:
+        parser.error("--decoder-steps must be >= 1")
+    if args.decoder_seed is not None and args.decoder_seed < 0:
+        parser.error("--decoder-seed must be >= 0")
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     th = B.BehaviourThresholds()
     if args.seconds is not None:
@@ -141,17 +161,20 @@ def main() -> int:
     import torch
 
     torch.set_num_threads(args.threads)
-    rows = planner_rows(args.planner, seeds, th, args.cfg, args.steps)
+    rows = planner_rows(args.planner, seeds, th, args.cfg, args.steps, args.decoder_steps, args.decoder_seed)
     if args.data is not None:
         rows += reference_rows(args.data)
     def length(s: float | None) -> str:
         return "own length" if s is None else f"{s:g} s"
 
+    noise = "each seed's own" if args.decoder_seed is None else f"of seed {args.decoder_seed}"
     print_table(rows, ["rows", *B.CHECKS], title=f"Behaviour checks passed, seeds {seeds[0]}-{seeds[-1]}; walk, run, wave "
                 f"{length(th.seconds)}, hands and bow {length(th.action_seconds)}; guidance "
                 f"{'default' if args.cfg is None else args.cfg}; masked steps "
-                f"{'default' if args.steps is None else args.steps}")
-    path = write_json(args.out, {"benchmark": "planner_behaviour", "seeds": args.seeds, "first_seed": args.first_seed, "cfg_scale": args.cfg, "steps": args.steps, "thresholds": asdict(th),
+                f"{'default' if args.steps is None else args.steps}; decoder steps "
+                f"{'default' if args.decoder_steps is None else args.decoder_steps}; decoder noise {noise}")
+    path = write_json(args.out, {"benchmark": "planner_behaviour", "seeds": args.seeds, "first_seed": args.first_seed, "cfg_scale": args.cfg, "steps": args.steps,
+                                 "decoder_steps": args.decoder_steps, "decoder_seed": args.decoder_seed, "thresholds": asdict(th),
                                  "rows": rows}, threads=args.threads)
     print(f"wrote {path}")
     return 0

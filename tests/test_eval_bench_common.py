@@ -191,7 +191,7 @@ def test_planner_behaviour_counts_passes_per_check_and_passes_the_lengths(monkey
     from motok_robot.eval import behaviour as B
     from motok_robot.motion.synthetic import standing_clip, walking_clip
 
-    asked, asked_steps = [], set()
+    asked, asked_steps, asked_extra = [], set(), []
 
     class FakeGenerator:
         model_id = "fake"
@@ -199,9 +199,10 @@ def test_planner_behaviour_counts_passes_per_check_and_passes_the_lengths(monkey
         def __init__(self, kind):
             self.kind = kind
 
-        def generate(self, text, seconds=None, seed=0, cfg_scale=None, steps=None):
+        def generate(self, text, seconds=None, seed=0, cfg_scale=None, steps=None, **extra):
             asked.append((text, seconds, seed, cfg_scale))
             asked_steps.add(steps)
+            asked_extra.append(extra)
             frames = int(20 * (seconds or 2.0))
             joints = walking_clip(frames=frames) if text == B.WALK and seed == 0 else standing_clip(frames=frames)
             return type("Motion", (), {"joints": joints, "seconds": frames / 20})()
@@ -223,6 +224,43 @@ def test_planner_behaviour_counts_passes_per_check_and_passes_the_lengths(monkey
     assert row["walk"] == "0/2" and [s["seed"] for s in row["seeds"]] == [1, 2]
     assert asked_steps == {3}
     assert {seed for _, _, seed, _ in asked} == {1, 2}
+    assert all(extra == {} for extra in asked_extra)  # the generator's own decoding by default
+
+
+def test_planner_behaviour_decoder_seed_decodes_every_seed_from_one_noise(monkeypatch):
+    """``--decoder-seed K``: each seed's tokens are decoded from the noise of seed K (the decode
+    hook ignores the clip's seed), with ``--decoder-steps`` passed on; the planner still samples
+    with the clip's own seed."""
+    import planner_behaviour
+
+    import motok_robot.planner.generate as generate_module
+    from motok_robot.eval import behaviour as B
+    from motok_robot.motion.synthetic import standing_clip
+
+    decoded, planned = [], []
+
+    class Tokenizer:
+        def decode(self, tokens, length=None, steps=None, seed=0):
+            decoded.append((seed, steps))
+            return None
+
+    class FakeGenerator:
+        model_id = "fake"
+
+        def __init__(self, kind):
+            pass
+
+        def generate(self, text, seconds=None, seed=0, cfg_scale=None, steps=None, decoder_steps=None, decode=None):
+            planned.append(seed)
+            decode(Tokenizer(), "tokens", 40, decoder_steps, seed)
+            frames = int(20 * (seconds or 2.0))
+            return type("Motion", (), {"joints": standing_clip(frames=frames), "seconds": frames / 20})()
+
+    monkeypatch.setattr(generate_module, "MotionGenerator", FakeGenerator)
+    planner_behaviour.planner_rows(["ar"], range(3, 5), B.BehaviourThresholds(), cfg=None, decoder_steps=7,
+                                   decoder_seed=11)
+    assert set(planned) == {3, 4}
+    assert set(decoded) == {(11, 7)} and len(decoded) == len(planned) == 2 * 5
 
 
 def test_planner_text_reliance_scores_captioned_clips_in_each_condition():
