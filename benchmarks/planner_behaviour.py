@@ -13,7 +13,8 @@ length estimator, for raising both hands and bowing); ``--seconds`` sets one len
 number, or ``auto`` for the planner's own). ``--decoder-steps`` sets the tokenizer decoder's DDIM
 steps; ``--decoder-seed K`` decodes every seed's tokens from the noise of seed K instead of the
 seed's own (the tokens stay those of the seed), which separates what the planner's tokens decide
-from what the decoder's noise adds. With ``--data`` (a prepared dataset) the bow and
+from what the decoder's noise adds (the real clips' round trip then uses that noise too, instead
+of seed 0's). With ``--data`` (a prepared dataset) the bow and
 raise-both-hands checks also run on the real Bandai Namco clips of those labels, at their own
 lengths, and on the same clips encoded and decoded by the tokenizer: what a planner could reach
 with the best token sequence. Prints a table of passes per check and writes
@@ -67,7 +68,9 @@ def planner_rows(planners: list[str], seeds: range, th: B.BehaviourThresholds, c
             per_seed.append({"seed": seed, "seconds": lengths, **{name: r.to_dict() for name, r in results.items()}})
             print(f"  {kind} seed {seed}: " + ", ".join(f"{n} {'ok' if r.passed else 'MISS'}" for n, r in results.items()),
                   flush=True)
-        row = {"rows": f"{kind} planner", "model": gen.model_id, "seeds": per_seed}
+        noise = "" if decoder_seed is None else f", decoder noise {decoder_seed}"
+        row = {"rows": f"{kind} planner{noise}", "model": gen.model_id, "decoder_seed": decoder_seed,
+               "seeds": per_seed}
         for name in B.CHECKS:
             passed = [s["seed"] for s in per_seed if s[name]["passed"]]
             row[name] = f"{len(passed)}/{len(seeds)}"
@@ -76,10 +79,37 @@ def planner_rows(planners: list[str], seeds: range, th: B.BehaviourThresholds, c
     return rows
 
 
-def reference_rows(data: Path) -> list[dict]:
+def noise_summary(rows: list[dict]) -> list[dict]:
+    """For each planner measured under several decoder noises (rows of :func:`planner_rows` with
+    a ``decoder_seed``): per check, how many seeds' token plans pass under every noise, under some
+    and under none, and the pass rate over all plans and noises."""
+    by_kind: dict[str, list[dict]] = {}
+    for row in rows:
+        if row.get("decoder_seed") is not None:
+            by_kind.setdefault(row["rows"].split(",")[0], []).append(row)
+    summary = []
+    for kind, group in by_kind.items():
+        if len(group) < 2:
+            continue
+        seeds = [s["seed"] for s in group[0]["seeds"]]
+        out = {"rows": f"{kind} over {len(group)} decoder noises", "decoder_seeds": [r["decoder_seed"] for r in group]}
+        for name in B.CHECKS:
+            counts = [sum(s in set(r[f"{name}_seeds"]) for r in group) for s in seeds]
+            every = sum(c == len(group) for c in counts)
+            none = sum(c == 0 for c in counts)
+            rate = sum(counts) / (len(group) * len(seeds))
+            out[name] = f"{every} / {len(seeds) - every - none} / {none} ({100 * rate:.0f} %)"
+            out[f"{name}_counts"] = {"every": every, "some": len(seeds) - every - none, "none": none, "rate": rate}
+        summary.append(out)
+    return summary
+
+
+def reference_rows(data: Path, decoder_seeds: list[int | None] = (None,), decoder_steps: int | None = None) -> list[dict]:
     """The bow and raise-both-hands checks on the real Bandai clips of those labels (originals, at
     their own lengths), and on the same clips encoded and decoded by the tokenizer (what the best
-    possible token sequence gives; the configured tokenizer, seed 0 of its decoder)."""
+    possible token sequence gives; the configured tokenizer, one row per decoder noise seed in
+    ``decoder_seeds``, None meaning seed 0, with ``decoder_steps`` DDIM steps, default the
+    tokenizer's)."""
     import torch
 
     from motok_robot.data.dataset import PreparedDataset
@@ -93,7 +123,7 @@ def reference_rows(data: Path) -> list[dict]:
     ds = tokenizer.frames_per_token
     dataset = PreparedDataset(data, "all")
     real: dict[str, list[bool]] = {label: [] for label in REFERENCE}
-    decoded: dict[str, list[bool]] = {label: [] for label in REFERENCE}
+    decoded = {noise: {label: [] for label in REFERENCE} for noise in decoder_seeds}
     for clip_id in dataset.clip_ids:
         record = dataset.record(clip_id)
         label = clip_action(record) if record["source"] == "bandai" and not record.get("mirror_of") else None
@@ -104,12 +134,16 @@ def reference_rows(data: Path) -> list[dict]:
         check = REFERENCE[label][1]
         real[label].append(check(joints_from_features(features[:usable]).astype(np.float64)).passed)
         with torch.no_grad():
-            x = torch.from_numpy(features[None, :usable])
-            y = tokenizer.decode(tokenizer.encode(x), length=usable, seed=0)
-        decoded[label].append(check(joints_from_features(y[0].numpy()).astype(np.float64)).passed)
+            tokens = tokenizer.encode(torch.from_numpy(features[None, :usable]))
+            for noise in decoder_seeds:
+                y = tokenizer.decode(tokens, length=usable, steps=decoder_steps, seed=0 if noise is None else noise)
+                decoded[noise][label].append(check(joints_from_features(y[0].numpy()).astype(np.float64)).passed)
     rows = []
-    for name, outcomes in (("real Bandai clips (own length)", real), ("the same clips through the tokenizer", decoded)):
-        row = {"rows": name, "model": str(data if outcomes is real else tokenizer_run)}
+    named = [("real Bandai clips (own length)", real, str(data))]
+    named += [("the same clips through the tokenizer" + ("" if noise is None else f", decoder noise {noise}"),
+               decoded[noise], str(tokenizer_run)) for noise in decoder_seeds]
+    for name, outcomes, source in named:
+        row = {"rows": name, "model": source}
         for label, (check_name, _) in REFERENCE.items():
             row[check_name] = f"{sum(outcomes[label])}/{len(outcomes[label])}" if outcomes[label] else "-"
         rows.append(row)
@@ -129,8 +163,9 @@ def main() -> int:
                         help="masked planner unmasking iterations (default: the sampling default, 10)")
     parser.add_argument("--decoder-steps", type=int, default=None,
                         help="tokenizer decoder DDIM steps (default: the tokenizer's, 20)")
-    parser.add_argument("--decoder-seed", type=int, default=None,
-                        help="decode every seed's tokens from this noise seed (default: the seed's own)")
+    parser.add_argument("--decoder-seed", type=int, nargs="+", default=None,
+                        help="decode every seed's tokens from this noise seed (default: the seed's own); several: "
+                             "one row per noise, and a summary of the seeds passing under every / some / no noise")
     parser.add_argument("--data", type=Path, default=None, help="prepared dataset for the real-clip reference row")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/planner_behaviour.json"))
@@ -143,8 +178,8 @@ def main() -> int:
         parser.error("--steps must be >= 1")
     if args.decoder_steps is not None and args.decoder_steps < 1:
         parser.error("--decoder-steps must be >= 1")
-    if args.decoder_seed is not None and args.decoder_seed < 0:
-        parser.error("--decoder-seed must be >= 0")
+    if args.decoder_seed is not None and (min(args.decoder_seed) < 0 or len(set(args.decoder_seed)) < len(args.decoder_seed)):
+        parser.error("--decoder-seed: seeds must be >= 0 and distinct")
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     th = B.BehaviourThresholds()
     if args.seconds is not None:
@@ -161,21 +196,29 @@ def main() -> int:
     import torch
 
     torch.set_num_threads(args.threads)
-    rows = planner_rows(args.planner, seeds, th, args.cfg, args.steps, args.decoder_steps, args.decoder_seed)
+    noises = args.decoder_seed or [None]
+    rows = []
+    for kind in args.planner:
+        for noise in noises:
+            rows += planner_rows([kind], seeds, th, args.cfg, args.steps, args.decoder_steps, noise)
+    summary = noise_summary(rows)
     if args.data is not None:
-        rows += reference_rows(args.data)
+        rows += reference_rows(args.data, noises, args.decoder_steps)
     def length(s: float | None) -> str:
         return "own length" if s is None else f"{s:g} s"
 
-    noise = "each seed's own" if args.decoder_seed is None else f"of seed {args.decoder_seed}"
+    noise = "each seed's own" if args.decoder_seed is None else "of the seed in the row"
     print_table(rows, ["rows", *B.CHECKS], title=f"Behaviour checks passed, seeds {seeds[0]}-{seeds[-1]}; walk, run, wave "
                 f"{length(th.seconds)}, hands and bow {length(th.action_seconds)}; guidance "
                 f"{'default' if args.cfg is None else args.cfg}; masked steps "
                 f"{'default' if args.steps is None else args.steps}; decoder steps "
                 f"{'default' if args.decoder_steps is None else args.decoder_steps}; decoder noise {noise}")
+    if summary:
+        print_table(summary, ["rows", *B.CHECKS], title="Seeds whose token plan passes under every / some / no decoder noise "
+                    "(pass rate over all plans and noises)")
     path = write_json(args.out, {"benchmark": "planner_behaviour", "seeds": args.seeds, "first_seed": args.first_seed, "cfg_scale": args.cfg, "steps": args.steps,
                                  "decoder_steps": args.decoder_steps, "decoder_seed": args.decoder_seed, "thresholds": asdict(th),
-                                 "rows": rows}, threads=args.threads)
+                                 "rows": rows, "noise_summary": summary}, threads=args.threads)
     print(f"wrote {path}")
     return 0
 

@@ -263,6 +263,30 @@ def test_planner_behaviour_decoder_seed_decodes_every_seed_from_one_noise(monkey
     assert set(decoded) == {(11, 7)} and len(decoded) == len(planned) == 2 * 5
 
 
+def test_planner_behaviour_noise_summary_counts_plans_passing_under_every_some_no_noise():
+    """``noise_summary``: per planner measured under several decoder noises, the seeds whose plan
+    passes under every noise, some, none, and the pass rate; rows without a decoder seed and a
+    planner under one noise only are left out."""
+    import planner_behaviour
+
+    from motok_robot.eval import behaviour as B
+
+    def row(kind, noise, bow_seeds):
+        r = {"rows": f"{kind} planner" + ("" if noise is None else f", decoder noise {noise}"), "decoder_seed": noise,
+             "seeds": [{"seed": s} for s in range(4)]}
+        for name in B.CHECKS:
+            r[f"{name}_seeds"] = list(range(4)) if name != "bow" else bow_seeds
+        return r
+
+    rows = [row("ar", None, [0]), row("ar", 0, [0, 1]), row("ar", 5, [1, 2]), row("masked", 3, [0])]
+    summary = planner_behaviour.noise_summary(rows)
+    assert [s["rows"] for s in summary] == ["ar planner over 2 decoder noises"]
+    assert summary[0]["decoder_seeds"] == [0, 5]
+    assert summary[0]["bow_counts"] == {"every": 1, "some": 2, "none": 1, "rate": 0.5}
+    assert summary[0]["bow"] == "1 / 2 / 1 (50 %)"
+    assert summary[0]["walk_counts"]["every"] == 4
+
+
 def test_planner_text_reliance_scores_captioned_clips_in_each_condition():
     """``planner_text_reliance.token_nll`` with a stand-in AR planner that records what it is
     given: only clips with a caption count (every motion token, no [END]); "other caption" gives
