@@ -27,7 +27,9 @@ TH = B.BehaviourThresholds()
 #: benchmarks/planner_behaviour.py) and the model card: seed 0 passing says little about a sampler.
 KNOWN_MISSES = {
     "5c9e80ceefcbd3ac": {"bow": "with seed 0 the shipped AR planner bows only 22.6 degrees (the check asks for 30) "
-                                "and straightens up again; it bows and comes back up in 54 of seeds 0-95"},
+                                "and straightens up again; decoded from the noise of seeds 1-5 instead, the same "
+                                "tokens bow 24-39 degrees (noises 1 and 4 pass); it bows and comes back up in 54 "
+                                "of seeds 0-95"},
 }
 
 
