@@ -1,7 +1,7 @@
 """Behaviour pass rates of the planners over many seeds (the tests check seed 0, and floors over 0-7).
 
 Run: python benchmarks/planner_behaviour.py [--planner masked ar] [--seeds 12] [--first-seed 0] [--seconds S|auto]
-       [--cfg S] [--steps N] [--decoder-steps N] [--decoder-seed K] [--data runs/prepared] [--threads 2]
+       [--cfg S] [--steps N] [--decoder-steps N] [--decoder-seed K ...] [--data runs/prepared] [--threads 2]
        [--out benchmarks/results/planner_behaviour.json]
 
 For every planner and seed ``F..F+N-1`` (``--first-seed``, default 0) it generates the five prompts of
@@ -69,7 +69,7 @@ def planner_rows(planners: list[str], seeds: range, th: B.BehaviourThresholds, c
             print(f"  {kind} seed {seed}: " + ", ".join(f"{n} {'ok' if r.passed else 'MISS'}" for n, r in results.items()),
                   flush=True)
         noise = "" if decoder_seed is None else f", decoder noise {decoder_seed}"
-        row = {"rows": f"{kind} planner{noise}", "model": gen.model_id, "decoder_seed": decoder_seed,
+        row = {"rows": f"{kind} planner{noise}", "planner": kind, "model": gen.model_id, "decoder_seed": decoder_seed,
                "seeds": per_seed}
         for name in B.CHECKS:
             passed = [s["seed"] for s in per_seed if s[name]["passed"]]
@@ -86,13 +86,13 @@ def noise_summary(rows: list[dict]) -> list[dict]:
     by_kind: dict[str, list[dict]] = {}
     for row in rows:
         if row.get("decoder_seed") is not None:
-            by_kind.setdefault(row["rows"].split(",")[0], []).append(row)
+            by_kind.setdefault(row["planner"], []).append(row)
     summary = []
     for kind, group in by_kind.items():
         if len(group) < 2:
             continue
         seeds = [s["seed"] for s in group[0]["seeds"]]
-        out = {"rows": f"{kind} over {len(group)} decoder noises", "decoder_seeds": [r["decoder_seed"] for r in group]}
+        out = {"rows": f"{kind} planner over {len(group)} decoder noises", "planner": kind, "decoder_seeds": [r["decoder_seed"] for r in group]}
         for name in B.CHECKS:
             counts = [sum(s in set(r[f"{name}_seeds"]) for r in group) for s in seeds]
             every = sum(c == len(group) for c in counts)

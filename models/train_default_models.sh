@@ -2,8 +2,9 @@
 # Re-trains the default models shipped in models/ (see models/MODEL_CARD.md for the data,
 # licences, times and metrics of the shipped run). CPU is enough: on 2 cores the whole
 # script takes a little over two hours (the AR planner, trained on a GPU for the shipped
-# weights, takes 24 min of it and gives a planner like the GPU runs). Every training step is resumable: run the script again
-# after a kill and each stage continues from its last checkpoint (--resume).
+# weights, takes 24 min of it and gives a planner like the GPU runs). Every training step
+# is resumable: run the script again after a kill and each stage continues from its last
+# checkpoint (--resume).
 #
 #   bash models/train_default_models.sh [DATASETS_DIR] [WORK_DIR]
 #

@@ -272,8 +272,8 @@ def test_planner_behaviour_noise_summary_counts_plans_passing_under_every_some_n
     from motok_robot.eval import behaviour as B
 
     def row(kind, noise, bow_seeds):
-        r = {"rows": f"{kind} planner" + ("" if noise is None else f", decoder noise {noise}"), "decoder_seed": noise,
-             "seeds": [{"seed": s} for s in range(4)]}
+        r = {"rows": f"{kind} planner" + ("" if noise is None else f", decoder noise {noise}"), "planner": kind,
+             "decoder_seed": noise, "seeds": [{"seed": s} for s in range(4)]}
         for name in B.CHECKS:
             r[f"{name}_seeds"] = list(range(4)) if name != "bow" else bow_seeds
         return r
