@@ -146,7 +146,7 @@ class PipelineConfig:
             ``models/planner_<planner>``, see :mod:`motok_robot.planner.generate`).
         device: torch device of generation.
         generation: extra keyword arguments of ``MotionGenerator.generate`` (``cfg_scale``,
-            ``steps``, ``decoder_steps``, ``temperature``, ``top_k``, ``top_p``).
+            ``steps``, ``decoder_steps``, ``decoder_seed``, ``temperature``, ``top_k``, ``top_p``).
         retarget: a :class:`retarget.config.RetargetConfig` (None: its defaults).
         validation: a :class:`motok_robot.sim.config.ValidationConfig` (None: its defaults).
         playback: a :class:`motok_robot.servo.config.PlaybackConfig` (None: the robot's bus

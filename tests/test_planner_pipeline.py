@@ -156,6 +156,43 @@ def test_generate_cli_writes_motion_npz(runs, tmp_path, kind):
     assert (tmp_path / "other.npz").read_bytes() != first
 
 
+def test_decoder_seed_renders_the_same_tokens_from_other_noise(runs, tmp_path):
+    """``--decoder-seed``: the tokens stay those of ``--seed``, the decoded motion changes with the
+    decoder's noise and is what decoding those tokens with that noise gives; equal to ``--seed``
+    it is the default file, byte for byte (no ``decoder_seed`` key), otherwise the file records it."""
+    from motok_robot.planner.generate import load_generator
+    from motok_robot.planner.motion_file import load_motion
+    from motok_robot.tokenizer import load_tokenizer, save_tokenizer
+
+    # the untrained test decoder outputs zeros whatever the noise (zero-initialised output layers):
+    # give its denoiser random weights, keeping the encoder and codebook, hence the tokens
+    tok = load_tokenizer(runs / "tok", device="cpu")
+    torch.manual_seed(1)
+    with torch.no_grad():
+        for p in tok.denoiser.parameters():
+            p.add_(0.3 * torch.randn_like(p))
+    save_tokenizer(tok, tmp_path / "tok")
+    common = ["generate", "a person walks forward", "--seconds", "2", "--seed", "3", "--planner", "ar",
+              "--tokenizer", str(tmp_path / "tok"), "--planner-run", str(runs / "ar")]
+    assert main(common + ["--out", str(tmp_path / "own.npz")]) == 0
+    assert main(common + ["--decoder-seed", "3", "--out", str(tmp_path / "same.npz")]) == 0
+    assert main(common + ["--decoder-seed", "9", "--out", str(tmp_path / "other.npz")]) == 0
+    assert (tmp_path / "same.npz").read_bytes() == (tmp_path / "own.npz").read_bytes()
+    own, other = load_motion(tmp_path / "own.npz"), load_motion(tmp_path / "other.npz")
+    assert "decoder_seed" not in own and other["decoder_seed"] == 9 and other["seed"] == 3
+    assert np.array_equal(own["tokens"], other["tokens"])
+    assert not np.allclose(own["features"], other["features"])
+
+    gen = load_generator("ar", tmp_path / "tok", runs / "ar")
+    expected = gen.tokenizer.decode(torch.as_tensor(other["tokens"])[None], length=40, seed=9)
+    assert np.allclose(other["features"], expected[0].numpy(), atol=1e-5)
+    seen = []
+    gen.generate("a person walks forward", seconds=2.0, seed=3, decoder_seed=9,
+                 decode=lambda tok, tokens, length, steps, seed: seen.append(seed) or tok.decode(
+                     tokens, length=length, steps=steps, seed=seed))
+    assert seen == [9]  # the control stage's decode hook gets the decoder's seed
+
+
 def test_generate_errors_are_one_line(runs, tmp_path, capsys, monkeypatch):
     common = ["--tokenizer", str(runs / "tok"), "--planner-run", str(runs / "masked"), "--out", str(tmp_path / "x.npz")]
     cases = [
@@ -165,6 +202,7 @@ def test_generate_errors_are_one_line(runs, tmp_path, capsys, monkeypatch):
         (["generate", "walk", "--seconds", "60"] + common, "at most"),
         (["generate", "--action", "fly"] + common, "unknown action"),
         (["generate", "walk", "--decoder-steps", "0"] + common, "decoder_steps"),
+        (["generate", "walk", "--decoder-seed", "-2"] + common, "--decoder-seed"),
         (["generate", "walk", "--top-p", "1.5"] + common, "top_p"),
         (["generate", "walk", "--temperature", "-1"] + common, "temperature"),
         (["generate"] + common, "TEXT"),

@@ -58,6 +58,8 @@ def register(commands, groups) -> None:
     gen.add_argument("--planner-run", type=Path, default=None, help="planner run (default models/planner_<kind>)")
     gen.add_argument("--steps", type=int, default=None, help="masked planner unmasking steps (default 10)")
     gen.add_argument("--decoder-steps", type=int, default=None, help="tokenizer decoder steps (default: tokenizer's)")
+    gen.add_argument("--decoder-seed", type=int, default=None,
+                     help="seed of the decoder's noise (default: --seed); the tokens stay those of --seed")
     gen.add_argument("--temperature", type=float, default=None, help="token sampling temperature (default 1; 0 = greedy)")
     gen.add_argument("--top-k", type=int, default=None)
     gen.add_argument("--top-p", type=float, default=None)
@@ -121,6 +123,8 @@ def generate_command(args: argparse.Namespace, generate_one=None) -> int:
         raise InputError("give a TEXT prompt, --prompts FILE, --action LABEL or --unconditional")
     if args.seed < 0:
         raise InputError(f"--seed must be >= 0 (got {args.seed})")
+    if args.decoder_seed is not None and args.decoder_seed < 0:
+        raise InputError(f"--decoder-seed must be >= 0 (got {args.decoder_seed})")
     if args.seconds is not None and args.seconds <= 0:
         raise InputError(f"--seconds must be positive (got {args.seconds:g})")
     if args.text is not None:
@@ -138,7 +142,7 @@ def generate_command(args: argparse.Namespace, generate_one=None) -> int:
     one = generate_one or (lambda generator, **kwargs: generator.generate(**kwargs))
     options = dict(seconds=args.seconds, seed=args.seed, cfg_scale=args.cfg, steps=args.steps,
                    decoder_steps=args.decoder_steps, temperature=args.temperature, top_k=args.top_k,
-                   top_p=args.top_p)
+                   top_p=args.top_p, decoder_seed=args.decoder_seed)
     if prompts is not None:
         for i, prompt in enumerate(tqdm(prompts, desc="generating", unit="prompt", disable=None)):
             motion = one(gen, text=prompt, **options)

@@ -65,6 +65,7 @@ class GeneratedMotion:
         model: identifiers of the models used.
         fps: frames per second (20).
         timings: seconds spent per stage (``text``, ``plan``, ``decode``, ``joints``).
+        decoder_seed: the seed of the decoder's noise when it was not ``seed`` (None: ``seed``).
     """
 
     joints: np.ndarray
@@ -75,6 +76,7 @@ class GeneratedMotion:
     model: str
     fps: int = FPS
     timings: dict[str, float] = field(default_factory=dict)
+    decoder_seed: int | None = None
 
     @property
     def seconds(self) -> float:
@@ -84,7 +86,8 @@ class GeneratedMotion:
         """Write ``motion.npz`` (see :mod:`motok_robot.planner.motion_file`)."""
         from motok_robot.planner.motion_file import save_motion
 
-        return save_motion(path, self.joints, self.features, self.tokens, self.text, self.seed, self.model, self.fps)
+        return save_motion(path, self.joints, self.features, self.tokens, self.text, self.seed, self.model, self.fps,
+                           decoder_seed=self.decoder_seed)
 
 
 def check_text(text: str) -> str:
@@ -172,6 +175,7 @@ class MotionGenerator:
         keep_tokens: np.ndarray | None = None,
         local=None,
         decode=None,
+        decoder_seed: int | None = None,
     ) -> GeneratedMotion:
         """Generate one motion; see :func:`generate` for the arguments.
 
@@ -186,8 +190,11 @@ class MotionGenerator:
 
         defaults = SampleConfig()
         cfg = self.planner.config
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise InputError(f"seed must be a non-negative integer, got {seed!r}")
+        for name, value in (("seed", seed), ("decoder_seed", decoder_seed)):
+            if value is None and name == "decoder_seed":
+                continue
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+                raise InputError(f"{name} must be a non-negative integer, got {value!r}")
         for name, value, low in (("steps", steps, 1), ("decoder_steps", decoder_steps, 1), ("top_k", top_k, 1)):
             if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low):
                 raise InputError(f"{name} must be an integer >= {low}, got {value!r}")
@@ -256,10 +263,11 @@ class MotionGenerator:
         timings["plan"] = time.perf_counter() - t1
         t2 = time.perf_counter()
         steps_dec = defaults.decoder_steps if decoder_steps is None else decoder_steps
+        noise_seed = int(seed) if decoder_seed is None else int(decoder_seed)
         if decode is None:
-            features = self.tokenizer.decode(tokens, length=frames, steps=steps_dec, seed=int(seed))
+            features = self.tokenizer.decode(tokens, length=frames, steps=steps_dec, seed=noise_seed)
         else:
-            features = decode(self.tokenizer, tokens, frames, steps_dec, int(seed))
+            features = decode(self.tokenizer, tokens, frames, steps_dec, noise_seed)
             if tuple(features.shape) != (1, frames, 263):
                 raise InputError(f"decode hook returned shape {tuple(features.shape)}, expected (1, {frames}, 263)")
         timings["decode"] = time.perf_counter() - t2
@@ -268,7 +276,9 @@ class MotionGenerator:
         joints = joints_from_features(feats).astype(np.float32)
         timings["joints"] = time.perf_counter() - t3
         return GeneratedMotion(joints=joints, features=feats, tokens=tokens[0].cpu().numpy().astype(np.int64),
-                               text=label, seed=int(seed), model=self.model_id, fps=int(cfg.fps), timings=timings)
+                               text=label, seed=int(seed), model=self.model_id, fps=int(cfg.fps), timings=timings,
+                               decoder_seed=None if decoder_seed is None or int(decoder_seed) == int(seed)
+                               else int(decoder_seed))
 
 
 _GENERATORS: dict[tuple, MotionGenerator] = {}
@@ -305,6 +315,7 @@ def generate(
     top_p: float | None = None,
     trajectory: np.ndarray | None = None,
     device: str = "cpu",
+    decoder_seed: int | None = None,
 ) -> GeneratedMotion:
     """Generate a motion from a sentence (or an action label, or unconditionally).
 
@@ -313,6 +324,9 @@ def generate(
         seconds: duration (0 < seconds <= the planner's maximum, 12 s by default); None = estimated
             from the text by the length estimator (6 s without text).
         seed: seeds planning and decoding; the same seed gives the same motion (and file).
+        decoder_seed: seeds the decoder's noise instead of ``seed`` (the tokens stay those of
+            ``seed``): another rendering of the same token plan. The noise sets part of the motion
+            (a bow's depth by tens of degrees; docs/evaluation.md).
         planner: "masked" (default) or "ar".
         cfg_scale: classifier-free guidance scale (default 2.5; 1 = plain conditional).
         action: an action label the planner was trained with (instead of text).
@@ -330,7 +344,8 @@ def generate(
     gen = load_generator(planner, tokenizer_run, planner_run, device)
     motion = gen.generate(text=text, seconds=seconds, seed=seed, cfg_scale=cfg_scale, action=action,
                           unconditional=unconditional, steps=steps, decoder_steps=decoder_steps,
-                          temperature=temperature, top_k=top_k, top_p=top_p, trajectory=trajectory)
+                          temperature=temperature, top_k=top_k, top_p=top_p, trajectory=trajectory,
+                          decoder_seed=decoder_seed)
     if out is not None:
         motion.save(out)
     return motion

@@ -2,7 +2,8 @@
 
 Keys: ``joints`` float32 ``[T, 22, 3]`` (metres, z up), ``features`` float32 ``[T, 263]``, ``fps``
 (int), ``text`` (str; "" when unconditional), ``tokens`` int64 ``[N]``, ``seed`` (int), ``model``
-(str: identifiers of the models used). No object arrays: ``np.load(path)`` works with the default
+(str: identifiers of the models used), and ``decoder_seed`` (int) only when the decoder's noise
+came from another seed than ``seed``. No object arrays: ``np.load(path)`` works with the default
 ``allow_pickle=False``.
 
 The file is a zip written with fixed timestamps, so the same content gives byte-identical files
@@ -43,7 +44,7 @@ def write_npz_reproducible(path: str | Path, arrays: dict[str, np.ndarray]) -> P
 
 
 def save_motion(path: str | Path, joints: np.ndarray, features: np.ndarray, tokens: np.ndarray, text: str,
-                seed: int, model: str, fps: int = 20) -> Path:
+                seed: int, model: str, fps: int = 20, decoder_seed: int | None = None) -> Path:
     """Validate and write a ``motion.npz``."""
     joints = np.asarray(joints, dtype=np.float32)
     features = np.asarray(features, dtype=np.float32)
@@ -62,11 +63,14 @@ def save_motion(path: str | Path, joints: np.ndarray, features: np.ndarray, toke
         "seed": np.array(int(seed)),
         "model": np.array(str(model)),
     }
+    if decoder_seed is not None:
+        arrays["decoder_seed"] = np.array(int(decoder_seed))
     return write_npz_reproducible(path, arrays)
 
 
 def load_motion(path: str | Path) -> dict[str, np.ndarray | str | int]:
-    """Read a ``motion.npz`` -> dict with numpy arrays and plain ``text``/``model``/``seed``/``fps``."""
+    """Read a ``motion.npz`` -> dict with numpy arrays and plain ``text``/``model``/``seed``/``fps``
+    (and ``decoder_seed`` when the file has one)."""
     path = Path(path)
     data = read_npz_fields(path, "motion file")
     for key in ("joints", "fps"):
@@ -76,7 +80,7 @@ def load_motion(path: str | Path) -> dict[str, np.ndarray | str | int]:
     for key in ("text", "model"):
         if key in data:
             out[key] = str(data[key])
-    for key in ("seed", "fps"):
+    for key in ("seed", "fps", "decoder_seed"):
         if key in data:
             out[key] = int(data[key])
     return out
