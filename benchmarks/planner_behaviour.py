@@ -48,9 +48,7 @@ def planner_rows(planners: list[str], seeds: range, th: B.BehaviourThresholds, c
     if decoder_steps is not None:
         extra["decoder_steps"] = decoder_steps
     if decoder_seed is not None:
-        # the hook gets the clip's own seed (unused here): the noise comes from decoder_seed
-        extra["decode"] = lambda tokenizer, tokens, length, dsteps, _seed: tokenizer.decode(
-            tokens, length=length, steps=dsteps, seed=decoder_seed)
+        extra["decoder_seed"] = decoder_seed
 
     rows = []
     for kind in planners:

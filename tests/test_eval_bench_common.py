@@ -228,9 +228,8 @@ def test_planner_behaviour_counts_passes_per_check_and_passes_the_lengths(monkey
 
 
 def test_planner_behaviour_decoder_seed_decodes_every_seed_from_one_noise(monkeypatch):
-    """``--decoder-seed K``: each seed's tokens are decoded from the noise of seed K (the decode
-    hook ignores the clip's seed), with ``--decoder-steps`` passed on; the planner still samples
-    with the clip's own seed."""
+    """``--decoder-seed K``: each seed's tokens are decoded from the noise of seed K, with
+    ``--decoder-steps`` passed on; the planner still samples with the clip's own seed."""
     import planner_behaviour
 
     import motok_robot.planner.generate as generate_module
@@ -239,20 +238,16 @@ def test_planner_behaviour_decoder_seed_decodes_every_seed_from_one_noise(monkey
 
     decoded, planned = [], []
 
-    class Tokenizer:
-        def decode(self, tokens, length=None, steps=None, seed=0):
-            decoded.append((seed, steps))
-            return None
-
     class FakeGenerator:
         model_id = "fake"
 
         def __init__(self, kind):
             pass
 
-        def generate(self, text, seconds=None, seed=0, cfg_scale=None, steps=None, decoder_steps=None, decode=None):
+        def generate(self, text, seconds=None, seed=0, cfg_scale=None, steps=None, decoder_steps=None,
+                     decoder_seed=None):
             planned.append(seed)
-            decode(Tokenizer(), "tokens", 40, decoder_steps, seed)
+            decoded.append((decoder_seed, decoder_steps))
             frames = int(20 * (seconds or 2.0))
             return type("Motion", (), {"joints": standing_clip(frames=frames), "seconds": frames / 20})()
 
