@@ -90,7 +90,8 @@ def noise_summary(rows: list[dict]) -> list[dict]:
         if len(group) < 2:
             continue
         seeds = [s["seed"] for s in group[0]["seeds"]]
-        out = {"rows": f"{kind} planner over {len(group)} decoder noises", "planner": kind, "decoder_seeds": [r["decoder_seed"] for r in group]}
+        out = {"rows": f"{kind} planner over {len(group)} decoder noises", "planner": kind,
+               "decoder_seeds": [r["decoder_seed"] for r in group]}
         for name in B.CHECKS:
             counts = [sum(s in set(r[f"{name}_seeds"]) for r in group) for s in seeds]
             every = sum(c == len(group) for c in counts)

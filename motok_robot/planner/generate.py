@@ -190,11 +190,11 @@ class MotionGenerator:
 
         defaults = SampleConfig()
         cfg = self.planner.config
-        for name, value in (("seed", seed), ("decoder_seed", decoder_seed)):
-            if value is None and name == "decoder_seed":
-                continue
+        noise_seed = seed if decoder_seed is None else decoder_seed
+        for name, value in (("seed", seed), ("decoder_seed", noise_seed)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
                 raise InputError(f"{name} must be a non-negative integer, got {value!r}")
+        seed, noise_seed = int(seed), int(noise_seed)
         for name, value, low in (("steps", steps, 1), ("decoder_steps", decoder_steps, 1), ("top_k", top_k, 1)):
             if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low):
                 raise InputError(f"{name} must be an integer >= {low}, got {value!r}")
@@ -251,7 +251,7 @@ class MotionGenerator:
         if unconditional:
             scale = 1.0  # both guidance branches would be the null condition
         tokens = self.planner.plan(
-            cond, n_tokens, seed=int(seed),
+            cond, n_tokens, seed=seed,
             cfg_scale=scale,
             temperature=defaults.temperature if temperature is None else float(temperature),
             top_k=top_k if top_k is not None else defaults.top_k,
@@ -263,7 +263,6 @@ class MotionGenerator:
         timings["plan"] = time.perf_counter() - t1
         t2 = time.perf_counter()
         steps_dec = defaults.decoder_steps if decoder_steps is None else decoder_steps
-        noise_seed = int(seed) if decoder_seed is None else int(decoder_seed)
         if decode is None:
             features = self.tokenizer.decode(tokens, length=frames, steps=steps_dec, seed=noise_seed)
         else:
@@ -276,9 +275,8 @@ class MotionGenerator:
         joints = joints_from_features(feats).astype(np.float32)
         timings["joints"] = time.perf_counter() - t3
         return GeneratedMotion(joints=joints, features=feats, tokens=tokens[0].cpu().numpy().astype(np.int64),
-                               text=label, seed=int(seed), model=self.model_id, fps=int(cfg.fps), timings=timings,
-                               decoder_seed=None if decoder_seed is None or int(decoder_seed) == int(seed)
-                               else int(decoder_seed))
+                               text=label, seed=seed, model=self.model_id, fps=int(cfg.fps), timings=timings,
+                               decoder_seed=None if noise_seed == seed else noise_seed)
 
 
 _GENERATORS: dict[tuple, MotionGenerator] = {}
