@@ -63,7 +63,7 @@ def generated_rows(planners: list[str], prompts: list[str], seeds: int) -> list[
 def reference_rows(data: Path) -> list[dict]:
     """Bandai Namco walks (every walk-* content) and runs, per style mean (originals, no mirrors)."""
     from motok_robot.data.dataset import PreparedDataset
-    from motok_robot.planner.data import clip_action
+    from motok_robot.data.groups import clip_action
 
     dataset = PreparedDataset(data, "all")
     by_style: dict[str, dict[str, list[dict]]] = {"walks": defaultdict(list), "runs": defaultdict(list)}

@@ -113,7 +113,7 @@ def reference_rows(data: Path, decoder_seeds: list[int | None] = (None,), decode
 
     from motok_robot.data.dataset import PreparedDataset
     from motok_robot.motion.features import joints_from_features
-    from motok_robot.planner.data import clip_action
+    from motok_robot.data.groups import clip_action
     from motok_robot.planner.generate import default_run
     from motok_robot.tokenizer import load_tokenizer
 

@@ -35,7 +35,7 @@ from common import print_table, write_json  # noqa: E402
 def clip_groups(dataset, per_content: int, seed: int = 0) -> dict[str, list[str]]:
     """Clip ids of a prepared ``dataset`` (one split) with a caption, up to ``per_content`` per
     action label (or source)."""
-    from motok_robot.planner.data import clip_action
+    from motok_robot.data.groups import clip_action
 
     groups: dict[str, list[str]] = defaultdict(list)
     for clip_id in dataset.clip_ids:

@@ -280,7 +280,7 @@ def test_top_k_top_p_filtering():
 
 
 def test_action_labels_from_index_records():
-    from motok_robot.planner.data import clip_action
+    from motok_robot.data.groups import clip_action
 
     assert clip_action({"action": " wave "}) == "wave"
     assert clip_action({"label": "kick", "source": "bandai"}) == "kick"

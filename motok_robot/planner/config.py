@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from motok_robot.config_utils import dataclass_from_dict, dataclass_to_dict
+from motok_robot.data.groups import check_balance
 from motok_robot.errors import InputError
 
 PLANNER_KINDS = ("masked", "ar")
@@ -165,8 +166,9 @@ class PlannerTrainConfig:
     token_phases: int = 1
     #: how training draws clips: a group of ``n`` clips with the same action label (or, without
     #: one, the same first caption) is drawn with total weight ``n ** (1 - balance_groups)``.
-    #: 0 = every clip equally often (the shipped runs: 888 "raise the left hand" clips against
-    #: 28 bows and 2 kicks); 1 = every group equally often; 0.5 = square-root balancing.
+    #: 0 = every clip equally often (the train split holds 888 "raise the left hand" clips
+    #: against 28 bows and 2 kicks); 1 = every group equally often; 0.5 = square-root balancing
+    #: (both shipped planners).  Weights from :func:`motok_robot.data.groups.balanced_weights`.
     balance_groups: float = 0.0
     #: planners with ``end_embedding``: this fraction of the training samples gets the "end
     #: unknown" entry although its crop ends with the clip, so the AR planner also learns to
@@ -197,8 +199,7 @@ class PlannerTrainConfig:
             raise InputError(f"train config: masked_loss_average must be 'token' or 'sample' (got {self.masked_loss_average!r})")
         if kind == "ar" and self.masked_loss_average != "token":
             raise InputError("train config: masked_loss_average is for the masked planner")
-        if not 0.0 <= self.balance_groups <= 1.0:
-            raise InputError(f"train config: balance_groups must be in [0, 1] (got {self.balance_groups})")
+        check_balance(self.balance_groups, "train config")
         if self.end_unknown_prob is None:
             self.end_unknown_prob = AR_END_UNKNOWN_PROB if kind == "ar" else 0.0
         if not 0.0 <= self.end_unknown_prob <= 1.0:

@@ -17,7 +17,6 @@ from __future__ import annotations
 import hashlib
 import json
 import re
-from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,6 +24,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from motok_robot.data.groups import balanced_weights, clip_action
 from motok_robot.errors import InputError
 from motok_robot.planner.conditions import Conditions, LocalConditions, random_local_conditions, stack_local
 from motok_robot.planner.config import ControlConfig
@@ -124,26 +124,6 @@ def embed_texts(texts: list[str], encoder, cache_dir: Path, batch: int = 256) ->
     return torch.stack([known[t] for t in texts])
 
 
-_BANDAI_NAME = re.compile(r"dataset-[12]_(?P<content>[a-z-]+)_[a-z-]+_\d+", re.IGNORECASE)
-
-
-def clip_action(record: dict) -> str | None:
-    """The action label of an index record, if any.
-
-    The record's ``action`` or ``label`` field; for Bandai Namco clips without one, the content
-    label of the file name (``dataset-1_{content}_{style}_{NNN}.bvh``, e.g. ``walk-left``).
-    """
-    for key in ("action", "label"):
-        value = record.get(key)
-        if isinstance(value, str) and value.strip():
-            return value.strip()
-    if record.get("source") == "bandai":
-        match = _BANDAI_NAME.search(Path(str(record.get("file", ""))).name)
-        if match:
-            return match.group("content").lower()
-    return None
-
-
 def normalise_text(text: str) -> str:
     return " ".join(str(text).split())
 
@@ -180,10 +160,7 @@ class PlannerData:
         (action label or caption) equally often, 0.5 = square-root balancing."""
         if balance == 0:
             return None
-        groups = [self.group_of(i) for i in range(len(self.clips))]
-        counts = Counter(groups)
-        weights = np.array([counts[g] ** -float(balance) for g in groups], dtype=np.float64)
-        return weights / weights.sum()
+        return balanced_weights([self.group_of(i) for i in range(len(self.clips))], balance)
 
     def batch(
         self,

@@ -20,6 +20,7 @@ from typing import Any
 
 from motok_robot.config_utils import dataclass_from_dict, dataclass_to_dict
 from motok_robot.config_utils import read_json_object
+from motok_robot.data.groups import check_balance
 from motok_robot.errors import InputError
 
 FORMAT = "motok-tokenizer"
@@ -125,8 +126,14 @@ class TrainConfig:
     #: decoder side (conditioning decoder + denoiser): every clip keeps its tokens, so planners
     #: trained on the ``init_from`` tokens stay valid with the new decoder
     freeze_tokens: bool = False
+    #: how training draws windows: every frame equally often (0), or a group of ``n`` clips with
+    #: the same action label (else the same first caption) weighed down by ``n ** balance_groups``
+    #: (1 = every group by its mean clip length, 0.5 = square-root balancing); the shared data's
+    #: train split holds 888 "raise the left hand" clips (mirrors included) against 28 bows
+    balance_groups: float = 0.0
 
     def validate(self) -> None:
+        check_balance(self.balance_groups, "train config")
         if self.freeze_tokens and not self.init_from:
             raise InputError("train config: freeze_tokens needs init_from (the run whose tokens to keep)")
         for name in ("batch_size", "window"):

@@ -27,6 +27,7 @@ import torch
 from safetensors.torch import load_file
 from tqdm import tqdm
 
+from motok_robot.data.groups import balanced_weights, clip_group
 from motok_robot.errors import InputError
 from motok_robot.tokenizer.checkpoint import CONFIG_FILE, WEIGHTS_FILE, atomic_save_tensors, read_run_config, save_tokenizer
 from motok_robot.tokenizer.config import TokenizerConfig, TrainConfig, to_dict, tokenizer_config_from_dict, train_config_from_dict
@@ -57,22 +58,27 @@ _RUNNING = ("loss", "reconstruction", "commitment", "perplexity", "usage")
 
 @dataclass
 class Clips:
-    """Feature sequences of one split: ``features[i]`` float32 ``[T_i, F]`` (raw), ``ids[i]``."""
+    """Feature sequences of one split: ``features[i]`` float32 ``[T_i, F]`` (raw), ``ids[i]``,
+    and the balancing group of each clip (:func:`motok_robot.data.groups.clip_group`; None: every
+    clip its own group)."""
 
     ids: list[str]
     features: list[np.ndarray]
+    groups: list[tuple[str, str]] | None = None
 
 
 class WindowSampler:
     """Random fixed-length windows ``[B, window, F]`` with a mask of real frames ``[B, window]``.
 
     A clip is drawn with probability proportional to ``max(frames, window)``, so every frame
-    of the data is (in expectation) seen equally often; a window starts uniformly inside it.
+    of the data is (in expectation) seen equally often, divided by ``n ** balance`` for a clip
+    of a group of ``n`` (:func:`~motok_robot.data.groups.balanced_weights`); a window starts
+    uniformly inside it.
     Clips shorter than the window are used whole, padded by repeating their last frame (the
     mask excludes the padding from the losses).  Clips shorter than ``min_frames`` are skipped.
     """
 
-    def __init__(self, clips: Clips, window: int, min_frames: int = 1, what: str = "train"):
+    def __init__(self, clips: Clips, window: int, min_frames: int = 1, what: str = "train", balance: float = 0.0):
         keep = [i for i, f in enumerate(clips.features) if f.shape[0] >= min_frames]
         if not keep:
             longest = max((f.shape[0] for f in clips.features), default=0)
@@ -81,7 +87,8 @@ class WindowSampler:
         self.features = [clips.features[i] for i in keep]
         self.skipped = len(clips.features) - len(keep)
         self.padded = sum(f.shape[0] < window for f in self.features)
-        self.weights = torch.tensor([float(max(f.shape[0], window)) for f in self.features], dtype=torch.float64)
+        groups = [clips.groups[i] for i in keep] if clips.groups is not None else [clips.ids[i] for i in keep]
+        self.weights = torch.from_numpy(balanced_weights(groups, balance, [max(f.shape[0], window) for f in self.features]))
 
     def sample(self, batch: int, generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
         which = torch.multinomial(self.weights, batch, replacement=True, generator=generator).tolist()
@@ -245,7 +252,7 @@ def train_tokenizer(
 
     window = max(cfg.window - cfg.window % tok_cfg.downsample, tok_cfg.downsample)
     min_frames = 2 * tok_cfg.downsample
-    sampler = WindowSampler(train, window, min_frames, "train")
+    sampler = WindowSampler(train, window, min_frames, "train", cfg.balance_groups)
     val_windows = validation_windows(val, window, cfg.val_clips, cfg.seed, min_frames) if val is not None else None
     steps_per_epoch = cfg.steps_per_epoch or max(1, math.ceil(len(sampler.features) / cfg.batch_size))
     total = cfg.steps if cfg.steps > 0 else cfg.epochs * steps_per_epoch
@@ -353,7 +360,8 @@ def load_split(data_dir: str | Path, split: str) -> Clips:
 
     dataset = PreparedDataset(data_dir, split)
     ids = list(dataset.clip_ids)
-    return Clips(ids, [np.asarray(dataset.features(i), dtype=np.float32) for i in ids])
+    return Clips(ids, [np.asarray(dataset.features(i), dtype=np.float32) for i in ids],
+                 [clip_group(dataset.record(i), i) for i in ids])
 
 
 def dataset_statistics(data_dir: str | Path) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,76 @@
+"""What a clip shows, for balancing the draw of training samples across groups of clips.
+
+A clip's group is its action label (the index record's ``action`` / ``label``, or for Bandai
+Namco the content of the file name), else its first sentence, else its id.  The tokenizer and
+the planner trainers both draw clips with :func:`balanced_weights`, so one label with hundreds
+of takes (a walk) does not drown one with a dozen (a bow).
+"""
+
+from __future__ import annotations
+
+import re
+from collections import Counter
+from collections.abc import Hashable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from motok_robot.errors import InputError
+
+_BANDAI_NAME = re.compile(r"dataset-[12]_(?P<content>[a-z-]+)_[a-z-]+_\d+", re.IGNORECASE)
+
+
+def clip_action(record: dict) -> str | None:
+    """The action label of an index record, if any.
+
+    The record's ``action`` or ``label`` field; for Bandai Namco clips without one, the content
+    label of the file name (``dataset-1_{content}_{style}_{NNN}.bvh``, e.g. ``walk-left``).
+    """
+    for key in ("action", "label"):
+        value = record.get(key)
+        if isinstance(value, str) and value.strip():
+            return value.strip()
+    if record.get("source") == "bandai":
+        match = _BANDAI_NAME.search(Path(str(record.get("file", ""))).name)
+        if match:
+            return match.group("content").lower()
+    return None
+
+
+def clip_group(record: dict, clip_id: str) -> tuple[str, str]:
+    """The balancing group of a clip: ``("action", label)``, else ``("text", first sentence)``,
+    else ``("clip", clip_id)``."""
+    action = clip_action(record)
+    if action:
+        return ("action", action)
+    texts = record.get("texts") or []
+    if texts and str(texts[0]).strip():
+        return ("text", " ".join(str(texts[0]).split()))
+    return ("clip", clip_id)
+
+
+def check_balance(balance: float, where: str) -> None:
+    if not 0.0 <= float(balance) <= 1.0:
+        raise InputError(f"{where}: balance_groups must be in [0, 1] (got {balance})")
+
+
+def balanced_weights(groups: Sequence[Hashable], balance: float, base: Sequence[float] | None = None) -> np.ndarray:
+    """Draw weights (summing to 1) of items in ``groups`` (one group key per item).
+
+    Every item starts with weight ``base`` (default 1: every item equally often; the tokenizer
+    passes clip lengths, so every frame is seen equally often) and is divided by
+    ``n ** balance``, where ``n`` is the number of items of its group: a group then holds
+    ``sum(its base) / n ** balance`` of the total.  ``balance`` 0 leaves the base weights, 1
+    weighs every group by its mean base weight (with base 1: every group equally often), 0.5 is
+    square-root balancing.
+    """
+    check_balance(balance, "balanced_weights")
+    if not len(groups):
+        raise InputError("balanced_weights: no items")
+    counts = Counter(groups)
+    weights = np.ones(len(groups), dtype=np.float64) if base is None else np.asarray(base, dtype=np.float64).copy()
+    if weights.shape != (len(groups),) or not np.all(weights > 0):
+        raise InputError(f"balanced_weights: base must hold {len(groups)} positive weights")
+    if balance:
+        weights /= np.array([counts[g] for g in groups], dtype=np.float64) ** float(balance)
+    return weights / weights.sum()
