@@ -1,8 +1,8 @@
 """Behaviour pass rates of the planners over many seeds (the tests check seed 0, and floors over 0-7).
 
 Run: python benchmarks/planner_behaviour.py [--planner masked ar] [--seeds 12] [--first-seed 0] [--seconds S|auto]
-       [--cfg S] [--steps N] [--decoder-steps N] [--decoder-seed K ...] [--data runs/prepared] [--threads 2]
-       [--out benchmarks/results/planner_behaviour.json]
+       [--cfg S] [--steps N] [--decoder-steps N] [--decoder-seed K ...] [--data runs/prepared [--reference-only]]
+       [--threads 2] [--out benchmarks/results/planner_behaviour.json]
 
 For every planner and seed ``F..F+N-1`` (``--first-seed``, default 0) it generates the five prompts of
 :mod:`motok_robot.eval.behaviour` and runs its six checks (walk, a planted foot, run faster than
@@ -17,8 +17,10 @@ from what the decoder's noise adds (the real clips' round trip then uses that no
 of seed 0's). With ``--data`` (a prepared dataset) the bow and
 raise-both-hands checks also run on the real Bandai Namco clips of those labels, at their own
 lengths, and on the same clips encoded and decoded by the tokenizer: what a planner could reach
-with the best token sequence. Prints a table of passes per check and writes
-JSON with every seed's measured values and motion lengths, and the machine description.
+with the best token sequence (every bow's values are listed per clip); ``--reference-only`` runs
+only those rows, to compare tokenizers (put one in ``$MOTOK_ROBOT_MODELS/tokenizer``). Prints a
+table of passes per check and writes JSON with every seed's measured values and motion lengths,
+and the machine description.
 """
 
 from __future__ import annotations
@@ -37,6 +39,8 @@ from motok_robot.eval import behaviour as B  # noqa: E402
 
 #: real-clip reference: Bandai label -> (check name, the check that applies to one clip of it)
 REFERENCE = {"bow": ("bow", B.check_bow), "raise-up-both-hands": ("raise_both_hands", B.check_raise_both_hands)}
+#: labels whose reference rows also list every clip's check values (the 15 bows; not the 434 hands)
+DETAILED = ("bow",)
 
 
 def planner_rows(planners: list[str], seeds: range, th: B.BehaviourThresholds, cfg: float | None,
@@ -108,7 +112,8 @@ def reference_rows(data: Path, decoder_seeds: list[int | None] = (None,), decode
     their own lengths), and on the same clips encoded and decoded by the tokenizer (what the best
     possible token sequence gives; the configured tokenizer, one row per decoder noise seed in
     ``decoder_seeds``, None meaning seed 0, with ``decoder_steps`` DDIM steps, default the
-    tokenizer's)."""
+    tokenizer's).  Each row's ``clips`` lists the check values of every clip of the
+    :data:`DETAILED` labels (a bow's peak pitch, when and how far back up)."""
     import torch
 
     from motok_robot.data.dataset import PreparedDataset
@@ -123,6 +128,13 @@ def reference_rows(data: Path, decoder_seeds: list[int | None] = (None,), decode
     dataset = PreparedDataset(data, "all")
     real: dict[str, list[bool]] = {label: [] for label in REFERENCE}
     decoded = {noise: {label: [] for label in REFERENCE} for noise in decoder_seeds}
+    details: dict = {"real": [], **{noise: [] for noise in decoder_seeds}}
+
+    def note(where, clip_id: str, label: str, result) -> bool:
+        if label in DETAILED:
+            details[where].append({"clip": clip_id, "label": label, "passed": result.passed, **result.values})
+        return result.passed
+
     for clip_id in dataset.clip_ids:
         record = dataset.record(clip_id)
         label = clip_action(record) if record["source"] == "bandai" and not record.get("mirror_of") else None
@@ -131,20 +143,22 @@ def reference_rows(data: Path, decoder_seeds: list[int | None] = (None,), decode
         features = np.asarray(dataset.features(clip_id), dtype=np.float32)
         usable = (len(features) // ds) * ds
         check = REFERENCE[label][1]
-        real[label].append(check(joints_from_features(features[:usable]).astype(np.float64)).passed)
+        real[label].append(note("real", clip_id, label, check(joints_from_features(features[:usable]).astype(np.float64))))
         with torch.no_grad():
             tokens = tokenizer.encode(torch.from_numpy(features[None, :usable]))
             for noise in decoder_seeds:
                 y = tokenizer.decode(tokens, length=usable, steps=decoder_steps, seed=0 if noise is None else noise)
-                decoded[noise][label].append(check(joints_from_features(y[0].numpy()).astype(np.float64)).passed)
+                result = check(joints_from_features(y[0].numpy()).astype(np.float64))
+                decoded[noise][label].append(note(noise, clip_id, label, result))
     rows = []
-    named = [("real Bandai clips (own length)", real, str(data))]
+    named = [("real Bandai clips (own length)", real, str(data), "real")]
     named += [("the same clips through the tokenizer" + ("" if noise is None else f", decoder noise {noise}"),
-               decoded[noise], str(tokenizer_run)) for noise in decoder_seeds]
-    for name, outcomes, source in named:
+               decoded[noise], str(tokenizer_run), noise) for noise in decoder_seeds]
+    for name, outcomes, source, where in named:
         row = {"rows": name, "model": source}
         for label, (check_name, _) in REFERENCE.items():
             row[check_name] = f"{sum(outcomes[label])}/{len(outcomes[label])}" if outcomes[label] else "-"
+        row["clips"] = details[where]
         rows.append(row)
     return rows
 
@@ -166,6 +180,9 @@ def main() -> int:
                         help="decode every seed's tokens from this noise seed (default: the seed's own); several: "
                              "one row per noise, and a summary of the seeds passing under every / some / no noise")
     parser.add_argument("--data", type=Path, default=None, help="prepared dataset for the real-clip reference row")
+    parser.add_argument("--reference-only", action="store_true",
+                        help="only the real clips and their tokenizer round trip (needs --data; no planner is loaded): "
+                             "compares tokenizers, e.g. a candidate in $MOTOK_ROBOT_MODELS/tokenizer")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/planner_behaviour.json"))
     args = parser.parse_args()
@@ -189,6 +206,8 @@ def main() -> int:
         if seconds is not None and seconds <= 0:
             parser.error("--seconds must be > 0")
         th = replace(th, seconds=seconds, action_seconds=seconds)
+    if args.reference_only and args.data is None:
+        parser.error("--reference-only needs --data")
     if args.data is not None and not (args.data / "index.jsonl").is_file():
         parser.error(f"--data {args.data}: no index.jsonl (make one with motok-robot data prepare)")
 
@@ -197,7 +216,7 @@ def main() -> int:
     torch.set_num_threads(args.threads)
     noises = args.decoder_seed or [None]
     rows = []
-    for kind in args.planner:
+    for kind in [] if args.reference_only else args.planner:
         for noise in noises:
             rows += planner_rows([kind], seeds, th, args.cfg, args.steps, args.decoder_steps, noise)
     summary = noise_summary(rows)
@@ -207,15 +226,22 @@ def main() -> int:
         return "own length" if s is None else f"{s:g} s"
 
     noise = "each seed's own" if args.decoder_seed is None else "of the seed in the row"
-    print_table(rows, ["rows", *B.CHECKS], title=f"Behaviour checks passed, seeds {seeds[0]}-{seeds[-1]}; walk, run, wave "
-                f"{length(th.seconds)}, hands and bow {length(th.action_seconds)}; guidance "
-                f"{'default' if args.cfg is None else args.cfg}; masked steps "
-                f"{'default' if args.steps is None else args.steps}; decoder steps "
-                f"{'default' if args.decoder_steps is None else args.decoder_steps}; decoder noise {noise}")
+    decoder = (f"decoder steps {'default' if args.decoder_steps is None else args.decoder_steps}; "
+               f"decoder noise {noise}")
+    if args.reference_only:
+        from motok_robot.planner.generate import default_run
+
+        title = f"Real clips and their tokenizer round trip ({default_run('tokenizer')}); {decoder}"
+    else:
+        title = (f"Behaviour checks passed, seeds {seeds[0]}-{seeds[-1]}; walk, run, wave {length(th.seconds)}, hands "
+                 f"and bow {length(th.action_seconds)}; guidance {'default' if args.cfg is None else args.cfg}; "
+                 f"masked steps {'default' if args.steps is None else args.steps}; {decoder}")
+    print_table(rows, ["rows", *B.CHECKS], title=title)
     if summary:
         print_table(summary, ["rows", *B.CHECKS], title="Seeds whose token plan passes under every / some / no decoder noise "
                     "(pass rate over all plans and noises)")
-    path = write_json(args.out, {"benchmark": "planner_behaviour", "seeds": args.seeds, "first_seed": args.first_seed, "cfg_scale": args.cfg, "steps": args.steps,
+    path = write_json(args.out, {"benchmark": "planner_behaviour", "seeds": 0 if args.reference_only else args.seeds,
+                                 "first_seed": args.first_seed, "cfg_scale": args.cfg, "steps": args.steps,
                                  "decoder_steps": args.decoder_steps, "decoder_seed": args.decoder_seed, "thresholds": asdict(th),
                                  "rows": rows, "noise_summary": summary}, threads=args.threads)
     print(f"wrote {path}")

@@ -282,6 +282,35 @@ def test_planner_behaviour_noise_summary_counts_plans_passing_under_every_some_n
     assert summary[0]["walk_counts"]["every"] == 4
 
 
+def test_planner_behaviour_reference_only_loads_no_planner(tmp_path, monkeypatch, capsys):
+    """``--reference-only``: the real clips and their round trip under each decoder noise, no
+    planner row (so a candidate tokenizer can be compared alone); without ``--data`` it is refused."""
+    import planner_behaviour
+
+    monkeypatch.setattr(planner_behaviour, "planner_rows", lambda *a, **k: pytest.fail("a planner was run"))
+    seen = {}
+
+    def reference_rows(data, noises, decoder_steps):
+        seen.update(data=data, noises=list(noises), steps=decoder_steps)
+        return [{"rows": "the same clips through the tokenizer", "model": "tok", "bow": "9/15"}]
+
+    monkeypatch.setattr(planner_behaviour, "reference_rows", reference_rows)
+    (tmp_path / "index.jsonl").write_text("")
+    out = tmp_path / "ref.json"
+    argv = ["planner_behaviour.py", "--reference-only", "--data", str(tmp_path), "--decoder-seed", "0", "3",
+            "--threads", "1", "--out", str(out)]
+    monkeypatch.setattr(sys, "argv", argv)
+    assert planner_behaviour.main() == 0
+    assert seen == {"data": tmp_path, "noises": [0, 3], "steps": None}
+    result = json.loads(out.read_text())
+    assert result["seeds"] == 0 and result["noise_summary"] == [] and [r["bow"] for r in result["rows"]] == ["9/15"]
+    assert "Real clips and their tokenizer round trip" in capsys.readouterr().out
+    monkeypatch.setattr(sys, "argv", ["planner_behaviour.py", "--reference-only"])
+    with pytest.raises(SystemExit) as stop:
+        planner_behaviour.main()
+    assert stop.value.code == 2 and "--reference-only needs --data" in capsys.readouterr().err
+
+
 def test_planner_text_reliance_scores_captioned_clips_in_each_condition():
     """``planner_text_reliance.token_nll`` with a stand-in AR planner that records what it is
     given: only clips with a caption count (every motion token, no [END]); "other caption" gives
