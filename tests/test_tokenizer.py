@@ -251,13 +251,15 @@ def _clips(n: int, frames: int, seed: int) -> Clips:
     return Clips([f"c{i}" for i in range(n)], [smooth_features(1, frames, seed + i)[0].numpy() for i in range(n)])
 
 
-def test_resume_equals_uninterrupted_training(tmp_path):
+@pytest.mark.parametrize("focus", [0.0, 1.5])
+def test_resume_equals_uninterrupted_training(tmp_path, focus):
     train, val = _clips(4, 40, 0), _clips(2, 40, 10)
     flat = np.concatenate(train.features)
     mean, std = flat.mean(0), flat.std(0)
     tok_cfg = TokenizerConfig(**TINY)
+    # with focus the draw weights measured at step 2 must come back from the step-3 checkpoint
     cfg = TrainConfig(seed=3, batch_size=2, window=16, lr=1e-3, warmup_steps=2, steps=6, steps_per_epoch=2,
-                      checkpoint_every=100, val_clips=2, val_sample_steps=2)
+                      checkpoint_every=100, val_clips=2, val_sample_steps=2, focus_errors=focus)
     full = train_tokenizer(train, val, mean, std, tmp_path / "full", tok_cfg, cfg, progress=False)
     assert full["steps"] == 6
     part = train_tokenizer(train, val, mean, std, tmp_path / "part", tok_cfg, cfg, progress=False, stop_at=3)
@@ -283,6 +285,12 @@ def test_resume_equals_uninterrupted_training(tmp_path):
     assert len(rows_a) == 4  # header + 3 epochs
     strip = lambda rows: [",".join(r.split(",")[:-1]) for r in rows]  # noqa: E731 - drop wall time
     assert strip(rows_a) == strip(rows_b)
+    focus_columns = [r.split(",")[-3:-1] for r in rows_a[1:]]
+    if focus:  # measured after epochs 1 and 2 (not after the last)
+        assert all(float(v) > 0 for row in focus_columns[:2] for v in row) and focus_columns[2] == ["", ""]
+        assert "focus" in load_file(str(tmp_path / "part" / "train_state.safetensors"))
+    else:
+        assert all(row == ["", ""] for row in focus_columns)
     # same seed, new run: deterministic
     again = train_tokenizer(train, val, mean, std, tmp_path / "again", tok_cfg, cfg, progress=False)
     assert again["steps"] == 6
@@ -353,3 +361,79 @@ def test_decoder_finetune_errors(tmp_path):
     with pytest.raises(InputError, match="keeps its architecture"):
         train_tokenizer(train, None, flat.mean(0), flat.std(0), tmp_path / "ft", TokenizerConfig(**{**TINY, "width": 64}),
                         cfg, progress=False)
+
+
+def test_focus_factors_weigh_clips_by_their_relative_error():
+    from motok_robot.tokenizer.train import focus_factors
+
+    errors = np.array([1.0, 1.0, 2.0, 4.0, 40.0])  # mean 9.6
+    f = focus_factors(errors, power=1.0, cap=10.0)
+    assert np.allclose(f[:4], np.array([1.0, 1.0, 2.0, 4.0]) / 9.6) and f[4] == pytest.approx(40 / 9.6)
+    g = focus_factors(errors, power=2.0, cap=4.0)  # clamped to [1/4, 4]
+    assert np.allclose(g, [0.25, 0.25, 0.25, 0.25, 4.0])
+    assert np.array_equal(focus_factors(errors, power=0.0, cap=10.0), np.ones(5))
+    for bad in ([], [1.0, np.nan], [1.0, -2.0]):
+        with pytest.raises(InputError, match="clip errors must be finite"):
+            focus_factors(np.array(bad), 1.0, 10.0)
+
+
+def test_window_sampler_draws_hard_clips_more_often_with_focus():
+    from motok_robot.tokenizer.train import WindowSampler, focus_factors
+
+    features = [np.full((40, 263), i, dtype=np.float32) for i in range(4)]
+    sampler = WindowSampler(Clips([f"c{i}" for i in range(4)], features), window=32)
+    gen = torch.Generator().manual_seed(0)
+    sampler.set_focus(focus_factors(np.array([1.0, 1.0, 1.0, 5.0]), 2.0, 10.0))  # 0.25 x 3 against 6.25
+    x, _ = sampler.sample(4000, gen)
+    assert abs(float((x[:, 0, 0] == 3).float().mean()) - 6.25 / 7.0) < 0.03
+    with pytest.raises(InputError, match="focus needs 4 positive finite factors"):
+        sampler.set_focus(np.array([1.0, 0.0, 1.0, 1.0]))
+    with pytest.raises(InputError, match="focus needs 4"):
+        sampler.set_focus(np.ones(3))
+
+
+def test_clip_errors_are_deterministic_root_relative_and_keep_the_mode():
+    from motok_robot.motion.features_torch import joints_from_features
+    from motok_robot.tokenizer.train import clip_errors
+
+    model = train_steps(tiny())
+    model.train()
+    clips = [smooth_features(1, 24, seed)[0].numpy() for seed in (1, 2)]
+    errors = clip_errors(model, clips, progress=False)
+    assert model.training and errors.shape == (2,) and np.all(errors > 0)
+    assert np.array_equal(errors, clip_errors(model, clips, progress=False))  # noise seed fixed, eval mode
+    # the number is the mean joint distance (cm) after both skeletons are moved to their root joint
+    x = torch.from_numpy(clips[1][None])
+    model.eval()
+    j, jh = joints_from_features(x), joints_from_features(model.reconstruct(x, steps=1, seed=0))
+    expected = float(((jh - jh[:, :, :1]) - (j - j[:, :, :1])).norm(dim=-1).mean()) * 100
+    assert errors[1] == pytest.approx(expected, rel=1e-5)
+
+
+@pytest.mark.parametrize("field, value, match", [("focus_errors", -1.0, "focus_errors must be within 0..4"),
+                                                 ("focus_errors", 5.0, "focus_errors must be within 0..4"),
+                                                 ("focus_cap", 0.5, "focus_cap must be >= 1")])
+def test_train_config_rejects_bad_focus(field, value, match):
+    with pytest.raises(InputError, match=match):
+        TrainConfig(**{field: value})
+
+
+def test_only_actions_trains_on_the_clips_of_those_labels(tmp_path):
+    groups = [("action", "bow"), ("action", "walk"), ("text", "a person waves"), ("action", "bow")]
+    train = Clips([f"c{i}" for i in range(4)], [smooth_features(1, 40, i)[0].numpy() for i in range(4)], groups)
+    bows = train.with_actions(("bow",), "train")
+    assert bows.ids == ["c0", "c3"] and bows.groups == [("action", "bow")] * 2
+    assert train.with_actions(("bow", "walk"), "train").ids == ["c0", "c1", "c3"]
+    with pytest.raises(InputError, match=r"train split has no clip of action \['jump'\] \(labels there: bow, walk\)"):
+        train.with_actions(("bow", "jump"), "train")
+    assert train.with_actions(("jump",), "val", required=False).ids == []  # a val split may lack the label
+    flat = np.concatenate(train.features)
+    cfg = TrainConfig(batch_size=2, window=16, steps=2, steps_per_epoch=2, val_clips=2, val_sample_steps=2,
+                      only_actions=("bow",))
+    summary = train_tokenizer(train, train, flat.mean(0), flat.std(0), tmp_path / "run", TokenizerConfig(**TINY), cfg,
+                              progress=False)
+    assert summary["train_clips"] == 2
+    saved = json.loads((tmp_path / "run" / "config.json").read_text())["train"]
+    assert saved["only_actions"] == ["bow"]  # a resumed run filters the same way
+    with pytest.raises(InputError, match="only_actions must be a list of action labels"):
+        TrainConfig(only_actions="bow")

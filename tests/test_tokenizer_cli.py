@@ -121,6 +121,12 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
     short.write_text(json.dumps({"tokenizer": {"downsample": 3}}))
     assert main(["train", "tokenizer", "--data", str(data), "--out", str(tmp_path / "r2"), "--config", str(short)]) == 2
     assert "downsample must be 2, 4 or 8" in capsys.readouterr().err
+    # the synthetic clips carry captions, no action labels
+    assert main(["train", "tokenizer", "--data", str(data), "--out", str(tmp_path / "r3"), "--only-actions", "bow"]) == 2
+    assert "train split has no clip of action ['bow'] (labels there: none)" in capsys.readouterr().err
+    assert main(["train", "tokenizer", "--data", str(data), "--out", str(tmp_path / "r3"), "--resume",
+                 "--only-actions", "bow"]) == 2
+    assert "drop --init-from / --freeze-tokens / --only-actions" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("split", ["test"])

@@ -40,6 +40,8 @@ def register(commands, groups) -> None:
     train.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's)")
     train.add_argument("--init-from", type=Path, default=None,
                        help="start from the weights (and architecture) of this tokenizer run")
+    train.add_argument("--only-actions", nargs="+", default=None, metavar="LABEL",
+                       help="train and validate only on the clips of these action labels (e.g. bow)")
     train.add_argument("--freeze-tokens", action="store_true",
                        help="with --init-from: train only the decoder side; encoder and codebook stay fixed, so "
                        "every clip keeps its tokens and planners trained on them stay valid")
@@ -78,8 +80,10 @@ def _train(args) -> int:
         train_section["init_from"] = str(args.init_from)
     if args.freeze_tokens:
         train_section["freeze_tokens"] = True
-    if args.resume and ("init_from" in train_section or "freeze_tokens" in train_section):
-        raise InputError("--resume continues with the run's own config.json; drop --init-from / --freeze-tokens")
+    if args.only_actions:
+        train_section["only_actions"] = list(args.only_actions)
+    if args.resume and any(key in train_section for key in ("init_from", "freeze_tokens", "only_actions")):
+        raise InputError("--resume continues with the run's own config.json; drop --init-from / --freeze-tokens / --only-actions")
     where = str(args.config) if args.config else "defaults"
     tok_cfg = tokenizer_config_from_dict(tok_section, where=f"{where} 'tokenizer'")
     train_cfg = train_config_from_dict(train_section, where=f"{where} 'train'")

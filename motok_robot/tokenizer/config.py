@@ -131,9 +131,27 @@ class TrainConfig:
     #: (1 = every group by its mean clip length, 0.5 = square-root balancing); the shared data's
     #: train split holds 888 "raise the left hand" clips (mirrors included) against 28 bows
     balance_groups: float = 0.0
+    #: hard-example sampling: at the start and after every epoch, each train clip's error is
+    #: measured (root-relative joint error of a one-step decode of its tokens, cm) and its draw
+    #: weight multiplied by ``(error / mean error) ** focus_errors``, clamped to
+    #: ``[1 / focus_cap, focus_cap]`` (0 = off).  Rare motions the tokenizer reconstructs badly
+    #: (the shared data's bows, cartwheels, crawls) are then drawn more often
+    focus_errors: float = 0.0
+    focus_cap: float = 10.0  #: bound of the focus factor (>= 1)
+    #: train (and validate) only on the clips of these action labels (empty = every clip): a
+    #: tokenizer specialised to a motion family, or a check of whether the architecture can
+    #: represent an action at all when it sees enough of it
+    only_actions: tuple[str, ...] = ()
 
     def validate(self) -> None:
         check_balance(self.balance_groups, "train config")
+        if isinstance(self.only_actions, str) or not all(isinstance(a, str) and a.strip() for a in self.only_actions):
+            raise InputError(f"train config: only_actions must be a list of action labels (got {self.only_actions!r})")
+        self.only_actions = tuple(self.only_actions)
+        if not 0.0 <= self.focus_errors <= 4.0:
+            raise InputError(f"train config: focus_errors must be within 0..4 (got {self.focus_errors})")
+        if self.focus_cap < 1.0:
+            raise InputError(f"train config: focus_cap must be >= 1 (got {self.focus_cap})")
         if self.freeze_tokens and not self.init_from:
             raise InputError("train config: freeze_tokens needs init_from (the run whose tokens to keep)")
         for name in ("batch_size", "window"):

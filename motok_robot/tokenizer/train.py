@@ -51,6 +51,8 @@ METRIC_COLUMNS = (
     "val_usage",
     "val_perplexity",
     "restarts",
+    "focus_error_cm",
+    "focus_error_p90_cm",
     "seconds",
 )
 _RUNNING = ("loss", "reconstruction", "commitment", "perplexity", "usage")
@@ -65,6 +67,17 @@ class Clips:
     ids: list[str]
     features: list[np.ndarray]
     groups: list[tuple[str, str]] | None = None
+
+    def with_actions(self, labels: tuple[str, ...], what: str, required: bool = True) -> Clips:
+        """The clips whose group is one of the action ``labels``; with ``required``, an error
+        naming the labels there when one of them has no clip."""
+        have = {g[1] for g in self.groups or [] if g[0] == "action"}
+        missing = [label for label in labels if label not in have]
+        if missing and required:
+            shown = ", ".join(sorted(have)[:12]) + (" ..." if len(have) > 12 else "")
+            raise InputError(f"only_actions: {what} split has no clip of action {missing} (labels there: {shown or 'none'})")
+        keep = [i for i, g in enumerate(self.groups or []) if g[0] == "action" and g[1] in labels]
+        return Clips([self.ids[i] for i in keep], [self.features[i] for i in keep], [self.groups[i] for i in keep])
 
 
 class WindowSampler:
@@ -88,7 +101,17 @@ class WindowSampler:
         self.skipped = len(clips.features) - len(keep)
         self.padded = sum(f.shape[0] < window for f in self.features)
         groups = [clips.groups[i] for i in keep] if clips.groups is not None else [clips.ids[i] for i in keep]
-        self.weights = torch.from_numpy(balanced_weights(groups, balance, [max(f.shape[0], window) for f in self.features]))
+        self.base = balanced_weights(groups, balance, [max(f.shape[0], window) for f in self.features])
+        self.set_focus(np.ones(len(self.features)))
+
+    def set_focus(self, factors: np.ndarray) -> None:
+        """Multiply every clip's draw weight by ``factors[i]`` (> 0; see :func:`focus_factors`)."""
+        factors = np.asarray(factors, dtype=np.float64)
+        if factors.shape != (len(self.features),) or not np.all(np.isfinite(factors) & (factors > 0)):
+            raise InputError(f"window sampler: focus needs {len(self.features)} positive finite factors")
+        self.focus = factors
+        weights = self.base * factors
+        self.weights = torch.from_numpy(weights / weights.sum())
 
     def sample(self, batch: int, generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
         which = torch.multinomial(self.weights, batch, replacement=True, generator=generator).tolist()
@@ -105,6 +128,41 @@ class WindowSampler:
                 out[b, clip.shape[0] :] = clip[-1]
                 mask[b, : clip.shape[0]] = True
         return torch.from_numpy(out), torch.from_numpy(mask)
+
+
+def clip_errors(model: MoTok, features: list[np.ndarray], progress: bool | None = None) -> np.ndarray:
+    """Each clip's root-relative mean joint error (cm) through ``model``: its tokens decoded in
+    one deterministic step (the denoiser's clean-motion estimate from noise seed 0; the conv
+    decoder's output), so the number does not depend on sampling noise.  The model is put in
+    eval mode for the pass and restored after."""
+    from motok_robot.motion.features_torch import joints_from_features
+
+    was_training = model.training
+    model.eval()
+    errors = np.empty(len(features), dtype=np.float64)
+    try:
+        bar = tqdm(features, desc="clip errors", unit="clip", leave=False, disable=None if progress is None else not progress)
+        for i, clip in enumerate(bar):
+            x = torch.from_numpy(np.ascontiguousarray(clip[None], dtype=np.float32)).to(model.device)
+            joints = joints_from_features(x)
+            decoded = joints_from_features(model.reconstruct(x, steps=1, seed=0))
+            joints, decoded = joints - joints[:, :, :1], decoded - decoded[:, :, :1]
+            errors[i] = float((decoded - joints).norm(dim=-1).mean()) * 100.0
+    finally:
+        model.train(was_training)
+    return errors
+
+
+def focus_factors(errors: np.ndarray, power: float, cap: float) -> np.ndarray:
+    """Draw-weight factors of hard-example sampling: ``(error / mean error) ** power`` clamped
+    to ``[1 / cap, cap]`` (all ones when ``power`` is 0)."""
+    errors = np.asarray(errors, dtype=np.float64)
+    if errors.size == 0 or not np.all(np.isfinite(errors) & (errors >= 0)):
+        raise InputError("focus: clip errors must be finite and >= 0")
+    mean = errors.mean()
+    if power == 0 or mean <= 0:
+        return np.ones_like(errors)
+    return np.clip((errors / mean) ** power, 1.0 / cap, cap)
 
 
 def learning_rate(step: int, total: int, cfg: TrainConfig) -> float:
@@ -250,6 +308,9 @@ def train_tokenizer(
         raise InputError(f"train config: device {cfg.device!r} requested but CUDA is not available")
     device = torch.device(cfg.device)
 
+    if cfg.only_actions:
+        train = train.with_actions(cfg.only_actions, "train")
+        val = val.with_actions(cfg.only_actions, "val", required=False) if val is not None else None
     window = max(cfg.window - cfg.window % tok_cfg.downsample, tok_cfg.downsample)
     min_frames = 2 * tok_cfg.downsample
     sampler = WindowSampler(train, window, min_frames, "train", cfg.balance_groups)
@@ -288,6 +349,8 @@ def train_tokenizer(
             )
         _load_optimizer(optimizer, {k: v.to(device) if not k.endswith(".step") else v for k, v in tensors.items()}, info["param_groups"])
         generator.set_state(tensors["rng"])
+        if "focus" in tensors:
+            sampler.set_focus(tensors["focus"].double().numpy())
         step = int(info["step"])
         running = {k: float(v) for k, v in info["running"].items()}
         running_n = int(info["running_n"])
@@ -299,10 +362,21 @@ def train_tokenizer(
         save_tokenizer(model, out, train=train_dict, step=step)  # weights first, then the state
         tensors, groups = _optimizer_tensors(optimizer)
         tensors["rng"] = generator.get_state()
+        if cfg.focus_errors:
+            tensors["focus"] = torch.from_numpy(sampler.focus.copy())
         info = {"step": step, "running": running, "running_n": running_n, "param_groups": groups, "total": total}
         atomic_save_tensors(tensors, state_path, metadata={"info": json.dumps(info)})
         _write_metrics(out / METRICS_FILE, rows)
 
+    focus_row: dict[str, float] = {}
+
+    def refocus() -> None:
+        errors = clip_errors(model, sampler.features, progress)
+        sampler.set_focus(focus_factors(errors, cfg.focus_errors, cfg.focus_cap))
+        focus_row.update(focus_error_cm=float(errors.mean()), focus_error_p90_cm=float(np.percentile(errors, 90)))
+
+    if cfg.focus_errors and not (resume and "focus" in tensors):
+        refocus()
     started = time.perf_counter()
     bar = tqdm(total=total, initial=step, desc="train tokenizer", unit="step", disable=None if progress is None else not progress)
     while step < total:
@@ -330,11 +404,14 @@ def train_tokenizer(
             if val_windows is not None:
                 row.update(evaluate_windows(model, *val_windows, steps=cfg.val_sample_steps))
             row["restarts"] = int(model.quantizer.restarts)
+            if cfg.focus_errors and step < total:
+                refocus()  # for the next epoch's draws; the row reports the errors measured now
+                row.update(focus_row)
             row["seconds"] = round(time.perf_counter() - started, 2)
             rows.append(row)
             running, running_n = {k: 0.0 for k in _RUNNING}, 0
             if progress is not False:  # one line per epoch, also in logs where the bar is hidden
-                shown = ("epoch", "step", "train_loss", "train_usage", "val_feature_mse", "val_mpjpe_cm", "val_usage", "restarts", "seconds")
+                shown = ("epoch", "step", "train_loss", "train_usage", "val_feature_mse", "val_mpjpe_cm", "val_usage", "restarts", "focus_error_cm", "seconds")
                 tqdm.write(" ".join(f"{k}={row[k]:.4g}" if isinstance(row[k], float) else f"{k}={row[k]}" for k in shown if k in row))
         if epoch_end or step % cfg.checkpoint_every == 0 or step == stop_at:
             checkpoint()
