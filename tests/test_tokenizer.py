@@ -407,7 +407,7 @@ def test_clip_errors_are_deterministic_root_relative_and_keep_the_mode():
     model.eval()
     j, jh = joints_from_features(x), joints_from_features(model.reconstruct(x, steps=1, seed=0))
     expected = float(((jh - jh[:, :, :1]) - (j - j[:, :, :1])).norm(dim=-1).mean()) * 100
-    assert errors[1] == pytest.approx(expected, rel=1e-5)
+    assert errors[1] == pytest.approx(expected, rel=1e-4)
 
 
 @pytest.mark.parametrize("field, value, match", [("focus_errors", -1.0, "focus_errors must be within 0..4"),

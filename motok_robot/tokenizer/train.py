@@ -135,7 +135,8 @@ def clip_errors(model: MoTok, features: list[np.ndarray], progress: bool | None 
     one deterministic step (the denoiser's clean-motion estimate from noise seed 0; the conv
     decoder's output), so the number does not depend on sampling noise.  The model is put in
     eval mode for the pass and restored after."""
-    from motok_robot.motion.features_torch import joints_from_features
+    from motok_robot.motion.features import joints_from_features
+    from motok_robot.motion.metrics import mpjpe
 
     was_training = model.training
     model.eval()
@@ -144,10 +145,8 @@ def clip_errors(model: MoTok, features: list[np.ndarray], progress: bool | None 
         bar = tqdm(features, desc="clip errors", unit="clip", leave=False, disable=None if progress is None else not progress)
         for i, clip in enumerate(bar):
             x = torch.from_numpy(np.ascontiguousarray(clip[None], dtype=np.float32)).to(model.device)
-            joints = joints_from_features(x)
-            decoded = joints_from_features(model.reconstruct(x, steps=1, seed=0))
-            joints, decoded = joints - joints[:, :, :1], decoded - decoded[:, :, :1]
-            errors[i] = float((decoded - joints).norm(dim=-1).mean()) * 100.0
+            decoded = model.reconstruct(x, steps=1, seed=0)[0].cpu().numpy()
+            errors[i] = mpjpe(joints_from_features(decoded), joints_from_features(clip), align_root=True) * 100.0
     finally:
         model.train(was_training)
     return errors
