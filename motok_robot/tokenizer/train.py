@@ -367,12 +367,11 @@ def train_tokenizer(
         atomic_save_tensors(tensors, state_path, metadata={"info": json.dumps(info)})
         _write_metrics(out / METRICS_FILE, rows)
 
-    focus_row: dict[str, float] = {}
-
-    def refocus() -> None:
+    def refocus() -> dict[str, float]:
+        """Re-measure every train clip's error, set the draw weights from it, return its summary."""
         errors = clip_errors(model, sampler.features, progress)
         sampler.set_focus(focus_factors(errors, cfg.focus_errors, cfg.focus_cap))
-        focus_row.update(focus_error_cm=float(errors.mean()), focus_error_p90_cm=float(np.percentile(errors, 90)))
+        return {"focus_error_cm": float(errors.mean()), "focus_error_p90_cm": float(np.percentile(errors, 90))}
 
     if cfg.focus_errors and not (resume and "focus" in tensors):
         refocus()
@@ -404,8 +403,7 @@ def train_tokenizer(
                 row.update(evaluate_windows(model, *val_windows, steps=cfg.val_sample_steps))
             row["restarts"] = int(model.quantizer.restarts)
             if cfg.focus_errors and step < total:
-                refocus()  # for the next epoch's draws; the row reports the errors measured now
-                row.update(focus_row)
+                row.update(refocus())  # weights for the next epoch's draws; the row reports the errors measured now
             row["seconds"] = round(time.perf_counter() - started, 2)
             rows.append(row)
             running, running_n = {k: 0.0 for k in _RUNNING}, 0
