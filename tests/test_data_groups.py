@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from motok_robot.data.groups import balanced_weights, clip_group
+from motok_robot.data.groups import balanced_weights, check_action_shares, clip_group, with_action_shares
 from motok_robot.errors import InputError
 
 
@@ -39,6 +39,39 @@ def test_balanced_weights_errors(args, match):
         balanced_weights(*args)
 
 
+def test_with_action_shares_gives_each_label_its_share_and_keeps_relative_weights():
+    groups = [("action", "walk")] * 6 + [("action", "bow"), ("action", "bow"), ("text", "a person jumps")]
+    weights = np.array([1.0] * 6 + [1.0, 3.0, 2.0])
+    out = with_action_shares(weights, groups, {"bow": 0.2}, "train split")
+    assert np.isclose(out.sum(), 1.0)
+    assert np.allclose(out[6:8], [0.05, 0.15])  # 0.2 split 1 : 3 as the bows were
+    rest = 0.8 * np.array([1.0] * 6 + [2.0]) / 8.0  # walks and the caption keep their 1 : 2
+    assert np.allclose(out[[0, 1, 2, 3, 4, 5, 8]], rest)
+    two = with_action_shares(weights, groups, {"bow": 0.1, "walk": 0.6}, "train split")
+    assert np.isclose(two[6:8].sum(), 0.1) and np.isclose(two[:6].sum(), 0.6) and np.isclose(two[8], 0.3)
+    assert np.allclose(with_action_shares(weights, groups, {}, "x"), weights / weights.sum())
+
+
+def test_with_action_shares_errors_name_the_label_and_the_labels_there():
+    groups = [("action", "walk"), ("action", "bow"), ("text", "a person jumps")]
+    with pytest.raises(InputError, match=r"train split: action_share names 'kick', which no clip has "
+                                         r"\(labels there: bow, walk\)"):
+        with_action_shares([1.0, 1.0, 1.0], groups, {"kick": 0.1}, "train split")
+    with pytest.raises(InputError, match="every clip is of an action in action_share"):
+        with_action_shares([1.0, 1.0], groups[:2], {"walk": 0.5, "bow": 0.4}, "train split")
+
+
+@pytest.mark.parametrize("shares, match", [(["bow"], "must map action labels to shares"),
+                                           ({"bow": 0.0}, r"action_share\['bow'\] must be a number in \(0, 1\)"),
+                                           ({"bow": 1.0}, "must be a number in"), ({"bow": True}, "must be a number in"),
+                                           ({"bow": "0.1"}, "must be a number in"), ({" ": 0.1}, "empty or non-text label"),
+                                           ({"bow": 0.6, "walk": 0.4}, "adds up to 1; it must stay below 1")])
+def test_check_action_shares_errors(shares, match):
+    with pytest.raises(InputError, match=match):
+        check_action_shares(shares, "cfg.json 'train'")
+    assert check_action_shares({" bow ": 0.05}, "x") == {"bow": 0.05}
+
+
 def test_tokenizer_window_sampler_balances_groups():
     from motok_robot.tokenizer.train import Clips, WindowSampler
 
@@ -56,6 +89,12 @@ def test_tokenizer_window_sampler_balances_groups():
     # without groups every clip is its own group: balancing changes nothing
     ungrouped = WindowSampler(Clips(ids, features), window=32, balance=1.0)
     assert torch.allclose(ungrouped.weights, torch.full((10,), 0.1, dtype=torch.float64))
+    # an action share overrides what balancing gives the label
+    shared = WindowSampler(Clips(ids, features, groups), window=32, balance=1.0, shares={"bow": 0.25})
+    x, _ = shared.sample(4000, gen)
+    assert abs(float((x[:, 0, 0] == 9).float().mean()) - 0.25) < 0.03
+    with pytest.raises(InputError, match="train split: action_share names 'kick'"):
+        WindowSampler(Clips(ids, features, groups), window=32, shares={"kick": 0.1})
 
 
 def test_tokenizer_config_rejects_a_bad_balance():
@@ -63,6 +102,10 @@ def test_tokenizer_config_rejects_a_bad_balance():
 
     with pytest.raises(InputError, match="balance_groups must be in"):
         train_config_from_dict({"balance_groups": -0.1}, where="cfg.json 'train'").validate()
+    with pytest.raises(InputError, match=r"train config: action_share\['bow'\] must be a number"):
+        train_config_from_dict({"action_share": {"bow": 2}}, where="cfg.json 'train'")
+    with pytest.raises(InputError, match="action_share and only_actions exclude each other"):
+        train_config_from_dict({"action_share": {"bow": 0.1}, "only_actions": ["bow"]}, where="cfg.json 'train'")
 
 
 def test_load_split_gives_each_clip_its_group(tmp_path):

@@ -437,3 +437,20 @@ def test_only_actions_trains_on_the_clips_of_those_labels(tmp_path):
     assert saved["only_actions"] == ["bow"]  # a resumed run filters the same way
     with pytest.raises(InputError, match="only_actions must be a list of action labels"):
         TrainConfig(only_actions="bow")
+
+
+def test_action_share_is_saved_and_reaches_the_sampler(tmp_path):
+    groups = [("action", "bow"), ("action", "walk"), ("text", "a person waves"), ("action", "walk")]
+    train = Clips([f"c{i}" for i in range(4)], [smooth_features(1, 40, i)[0].numpy() for i in range(4)], groups)
+    flat = np.concatenate(train.features)
+    cfg = TrainConfig(batch_size=2, window=16, steps=2, steps_per_epoch=2, val_clips=2, val_sample_steps=2,
+                      action_share={"bow": 0.5})
+    summary = train_tokenizer(train, train, flat.mean(0), flat.std(0), tmp_path / "run", TokenizerConfig(**TINY), cfg,
+                              progress=False)
+    assert summary["train_clips"] == 4  # every clip still trains
+    saved = json.loads((tmp_path / "run" / "config.json").read_text())["train"]
+    assert saved["action_share"] == {"bow": 0.5}  # a resumed run draws the same way
+    bad = TrainConfig(batch_size=2, window=16, steps=2, action_share={"kick": 0.1})
+    with pytest.raises(InputError, match=r"train split: action_share names 'kick', which no clip has \(labels there: bow, walk\)"):
+        train_tokenizer(train, None, flat.mean(0), flat.std(0), tmp_path / "bad", TokenizerConfig(**TINY), bad,
+                        progress=False)

@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from motok_robot.cli import main
+from motok_robot.errors import InputError
 from motok_robot.motion.features import features_from_joints
 from motok_robot.motion.synthetic import walking_clip
 
@@ -126,7 +127,20 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
     assert "train split has no clip of action ['bow'] (labels there: none)" in capsys.readouterr().err
     assert main(["train", "tokenizer", "--data", str(data), "--out", str(tmp_path / "r3"), "--resume",
                  "--only-actions", "bow"]) == 2
-    assert "drop --init-from / --freeze-tokens / --only-actions" in capsys.readouterr().err
+    assert "drop --init-from / --freeze-tokens / --only-actions / --action-share" in capsys.readouterr().err
+    assert main(["train", "tokenizer", "--data", str(data), "--out", str(tmp_path / "r4"), "--action-share", "bow"]) == 2
+    assert "--action-share: expected LABEL=SHARE such as bow=0.05 (got 'bow')" in capsys.readouterr().err
+    assert main(["train", "tokenizer", "--data", str(data), "--out", str(tmp_path / "r4"), "--action-share", "bow=0.1"]) == 2
+    assert "train split: action_share names 'bow', which no clip has (labels there: none)" in capsys.readouterr().err
+
+
+def test_action_share_flag_parses_label_equals_share():
+    from motok_robot.tokenizer.cli import parse_action_shares
+
+    assert parse_action_shares(["bow=0.05", "walk-left=0.1"]) == {"bow": 0.05, "walk-left": 0.1}
+    for bad in ("=0.1", "bow=", "bow=a lot", "bow"):
+        with pytest.raises(InputError, match="expected LABEL=SHARE"):
+            parse_action_shares([bad])
 
 
 @pytest.mark.parametrize("split", ["test"])

@@ -11,6 +11,7 @@ from __future__ import annotations
 import re
 from collections import Counter
 from collections.abc import Hashable, Sequence
+from typing import Any
 from pathlib import Path
 
 import numpy as np
@@ -74,3 +75,52 @@ def balanced_weights(groups: Sequence[Hashable], balance: float, base: Sequence[
     if balance:
         weights /= np.array([counts[g] for g in groups], dtype=np.float64) ** float(balance)
     return weights / weights.sum()
+
+
+def check_action_shares(shares: Any, where: str) -> dict[str, float]:
+    """``shares`` as ``{label: share}`` after checking it: labels are non-empty strings, each share
+    is in (0, 1) and together they leave room for the other clips (sum < 1)."""
+    if not isinstance(shares, dict):
+        raise InputError(f"{where}: action_share must map action labels to shares, e.g. {{\"bow\": 0.05}} (got {shares!r})")
+    out: dict[str, float] = {}
+    for label, share in shares.items():
+        if not isinstance(label, str) or not label.strip():
+            raise InputError(f"{where}: action_share has an empty or non-text label ({label!r})")
+        if isinstance(share, bool) or not isinstance(share, (int, float)) or not 0.0 < float(share) < 1.0:
+            raise InputError(f"{where}: action_share[{label!r}] must be a number in (0, 1) (got {share!r})")
+        out[label.strip()] = float(share)
+    if sum(out.values()) >= 1.0:
+        raise InputError(f"{where}: action_share adds up to {sum(out.values()):.3g}; it must stay below 1 "
+                         "so the other clips keep a share")
+    return out
+
+
+def with_action_shares(weights: Sequence[float], groups: Sequence[Hashable], shares: dict[str, float],
+                       where: str) -> np.ndarray:
+    """Draw weights in which the items of each action label in ``shares`` (group
+    ``("action", label)``, see :func:`clip_group`) hold that share of the total, keeping their
+    relative weights; every other item keeps its relative weight within the rest.
+
+    An error names a label that has no item (with the labels there) and the case where every
+    item belongs to a labelled group (no rest to scale).
+    """
+    weights = np.asarray(weights, dtype=np.float64)
+    if weights.shape != (len(groups),):
+        raise InputError(f"{where}: action_share needs one weight per clip")
+    if not shares:
+        return weights / weights.sum()
+    have = sorted({g[1] for g in groups if isinstance(g, tuple) and len(g) == 2 and g[0] == "action"})
+    out = np.zeros_like(weights)
+    taken = np.zeros(len(groups), dtype=bool)
+    for label, share in shares.items():
+        members = np.array([g == ("action", label) for g in groups], dtype=bool)
+        if not members.any():
+            shown = ", ".join(have[:12]) + (" ..." if len(have) > 12 else "")
+            raise InputError(f"{where}: action_share names {label!r}, which no clip has (labels there: {shown or 'none'})")
+        out[members] = share * weights[members] / weights[members].sum()
+        taken |= members
+    if taken.all():
+        raise InputError(f"{where}: every clip is of an action in action_share, so the shares cannot hold; "
+                         "use only_actions to train on those actions alone")
+    out[~taken] = (1.0 - sum(shares.values())) * weights[~taken] / weights[~taken].sum()
+    return out

@@ -42,6 +42,8 @@ def register(commands, groups) -> None:
                        help="start from the weights (and architecture) of this tokenizer run")
     train.add_argument("--only-actions", nargs="+", default=None, metavar="LABEL",
                        help="train and validate only on the clips of these action labels (e.g. bow)")
+    train.add_argument("--action-share", nargs="+", default=None, metavar="LABEL=SHARE",
+                       help="draw the clips of an action label with this share of all windows (e.g. bow=0.05)")
     train.add_argument("--freeze-tokens", action="store_true",
                        help="with --init-from: train only the decoder side; encoder and codebook stay fixed, so "
                        "every clip keeps its tokens and planners trained on them stay valid")
@@ -65,6 +67,21 @@ def register(commands, groups) -> None:
     rec.set_defaults(func=_reconstruct)
 
 
+def parse_action_shares(items: list[str]) -> dict[str, float]:
+    """``["bow=0.05", ...]`` as ``{"bow": 0.05}``; an error names an item that is not LABEL=NUMBER."""
+    shares: dict[str, float] = {}
+    for item in items:
+        label, sep, value = item.rpartition("=")
+        try:
+            share = float(value)
+        except ValueError:
+            share = None
+        if not sep or not label.strip() or share is None:
+            raise InputError(f"--action-share: expected LABEL=SHARE such as bow=0.05 (got {item!r})")
+        shares[label.strip()] = share
+    return shares
+
+
 def _train(args) -> int:
     from motok_robot.tokenizer.config import read_config_file, tokenizer_config_from_dict, train_config_from_dict
 
@@ -82,8 +99,11 @@ def _train(args) -> int:
         train_section["freeze_tokens"] = True
     if args.only_actions:
         train_section["only_actions"] = list(args.only_actions)
-    if args.resume and any(key in train_section for key in ("init_from", "freeze_tokens", "only_actions")):
-        raise InputError("--resume continues with the run's own config.json; drop --init-from / --freeze-tokens / --only-actions")
+    if args.action_share:
+        train_section["action_share"] = parse_action_shares(args.action_share)
+    if args.resume and any(key in train_section for key in ("init_from", "freeze_tokens", "only_actions", "action_share")):
+        raise InputError("--resume continues with the run's own config.json; "
+                         "drop --init-from / --freeze-tokens / --only-actions / --action-share")
     where = str(args.config) if args.config else "defaults"
     tok_cfg = tokenizer_config_from_dict(tok_section, where=f"{where} 'tokenizer'")
     train_cfg = train_config_from_dict(train_section, where=f"{where} 'train'")

@@ -27,7 +27,7 @@ import torch
 from safetensors.torch import load_file
 from tqdm import tqdm
 
-from motok_robot.data.groups import balanced_weights, clip_group
+from motok_robot.data.groups import balanced_weights, clip_group, with_action_shares
 from motok_robot.errors import InputError
 from motok_robot.tokenizer.checkpoint import CONFIG_FILE, WEIGHTS_FILE, atomic_save_tensors, read_run_config, save_tokenizer
 from motok_robot.tokenizer.config import TokenizerConfig, TrainConfig, to_dict, tokenizer_config_from_dict, train_config_from_dict
@@ -85,13 +85,15 @@ class WindowSampler:
 
     A clip is drawn with probability proportional to ``max(frames, window)``, so every frame
     of the data is (in expectation) seen equally often, divided by ``n ** balance`` for a clip
-    of a group of ``n`` (:func:`~motok_robot.data.groups.balanced_weights`); a window starts
-    uniformly inside it.
+    of a group of ``n`` (:func:`~motok_robot.data.groups.balanced_weights`); the clips of the
+    action labels in ``shares`` then hold that share of the draws
+    (:func:`~motok_robot.data.groups.with_action_shares`); a window starts uniformly inside it.
     Clips shorter than the window are used whole, padded by repeating their last frame (the
     mask excludes the padding from the losses).  Clips shorter than ``min_frames`` are skipped.
     """
 
-    def __init__(self, clips: Clips, window: int, min_frames: int = 1, what: str = "train", balance: float = 0.0):
+    def __init__(self, clips: Clips, window: int, min_frames: int = 1, what: str = "train", balance: float = 0.0,
+                 shares: dict[str, float] | None = None):
         keep = [i for i, f in enumerate(clips.features) if f.shape[0] >= min_frames]
         if not keep:
             longest = max((f.shape[0] for f in clips.features), default=0)
@@ -102,6 +104,8 @@ class WindowSampler:
         self.padded = sum(f.shape[0] < window for f in self.features)
         groups = [clips.groups[i] for i in keep] if clips.groups is not None else [clips.ids[i] for i in keep]
         self.base = balanced_weights(groups, balance, [max(f.shape[0], window) for f in self.features])
+        if shares:
+            self.base = with_action_shares(self.base, groups, shares, f"{what} split")
         self.set_focus(np.ones(len(self.features)))
 
     def set_focus(self, factors: np.ndarray) -> None:
@@ -312,7 +316,7 @@ def train_tokenizer(
         val = val.with_actions(cfg.only_actions, "val", required=False) if val is not None else None
     window = max(cfg.window - cfg.window % tok_cfg.downsample, tok_cfg.downsample)
     min_frames = 2 * tok_cfg.downsample
-    sampler = WindowSampler(train, window, min_frames, "train", cfg.balance_groups)
+    sampler = WindowSampler(train, window, min_frames, "train", cfg.balance_groups, cfg.action_share)
     val_windows = validation_windows(val, window, cfg.val_clips, cfg.seed, min_frames) if val is not None else None
     steps_per_epoch = cfg.steps_per_epoch or max(1, math.ceil(len(sampler.features) / cfg.batch_size))
     total = cfg.steps if cfg.steps > 0 else cfg.epochs * steps_per_epoch
