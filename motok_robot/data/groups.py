@@ -11,8 +11,8 @@ from __future__ import annotations
 import re
 from collections import Counter
 from collections.abc import Hashable, Sequence
-from typing import Any
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -77,6 +77,12 @@ def balanced_weights(groups: Sequence[Hashable], balance: float, base: Sequence[
     return weights / weights.sum()
 
 
+def action_labels_shown(groups: Sequence[Hashable]) -> str:
+    """The action labels among ``groups`` for an error message: sorted, the first 12, or 'none'."""
+    have = sorted({g[1] for g in groups if isinstance(g, tuple) and len(g) == 2 and g[0] == "action"})
+    return (", ".join(have[:12]) + (" ..." if len(have) > 12 else "")) or "none"
+
+
 def check_action_shares(shares: Any, where: str) -> dict[str, float]:
     """``shares`` as ``{label: share}`` after checking it: labels are non-empty strings, each share
     is in (0, 1) and together they leave room for the other clips (sum < 1)."""
@@ -109,14 +115,13 @@ def with_action_shares(weights: Sequence[float], groups: Sequence[Hashable], sha
         raise InputError(f"{where}: action_share needs one weight per clip")
     if not shares:
         return weights / weights.sum()
-    have = sorted({g[1] for g in groups if isinstance(g, tuple) and len(g) == 2 and g[0] == "action"})
     out = np.zeros_like(weights)
     taken = np.zeros(len(groups), dtype=bool)
     for label, share in shares.items():
         members = np.array([g == ("action", label) for g in groups], dtype=bool)
         if not members.any():
-            shown = ", ".join(have[:12]) + (" ..." if len(have) > 12 else "")
-            raise InputError(f"{where}: action_share names {label!r}, which no clip has (labels there: {shown or 'none'})")
+            raise InputError(f"{where}: action_share names {label!r}, which no clip has "
+                             f"(labels there: {action_labels_shown(groups)})")
         out[members] = share * weights[members] / weights[members].sum()
         taken |= members
     if taken.all():

@@ -27,7 +27,7 @@ import torch
 from safetensors.torch import load_file
 from tqdm import tqdm
 
-from motok_robot.data.groups import balanced_weights, clip_group, with_action_shares
+from motok_robot.data.groups import action_labels_shown, balanced_weights, clip_group, with_action_shares
 from motok_robot.errors import InputError
 from motok_robot.tokenizer.checkpoint import CONFIG_FILE, WEIGHTS_FILE, atomic_save_tensors, read_run_config, save_tokenizer
 from motok_robot.tokenizer.config import TokenizerConfig, TrainConfig, to_dict, tokenizer_config_from_dict, train_config_from_dict
@@ -74,8 +74,8 @@ class Clips:
         have = {g[1] for g in self.groups or [] if g[0] == "action"}
         missing = [label for label in labels if label not in have]
         if missing and required:
-            shown = ", ".join(sorted(have)[:12]) + (" ..." if len(have) > 12 else "")
-            raise InputError(f"only_actions: {what} split has no clip of action {missing} (labels there: {shown or 'none'})")
+            raise InputError(f"only_actions: {what} split has no clip of action {missing} "
+                             f"(labels there: {action_labels_shown(self.groups or [])})")
         keep = [i for i, g in enumerate(self.groups or []) if g[0] == "action" and g[1] in labels]
         return Clips([self.ids[i] for i in keep], [self.features[i] for i in keep], [self.groups[i] for i in keep])
 
