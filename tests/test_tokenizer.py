@@ -439,7 +439,7 @@ def test_only_actions_trains_on_the_clips_of_those_labels(tmp_path):
         TrainConfig(only_actions="bow")
 
 
-def test_action_share_is_saved_and_reaches_the_sampler(tmp_path):
+def test_action_share_is_saved_with_the_run_and_checked_against_the_train_labels(tmp_path):
     groups = [("action", "bow"), ("action", "walk"), ("text", "a person waves"), ("action", "walk")]
     train = Clips([f"c{i}" for i in range(4)], [smooth_features(1, 40, i)[0].numpy() for i in range(4)], groups)
     flat = np.concatenate(train.features)
