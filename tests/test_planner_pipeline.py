@@ -443,7 +443,33 @@ def test_balance_groups_draws_rare_labels_more_often():
     assert half[0] < half[8] < half[13]
 
 
-def test_balance_groups_trains_and_is_checked(runs, tmp_path):
+def test_action_share_gives_a_label_its_share_of_the_draws():
+    """``action_share`` gives the clips of a named label that share of the draws on top of
+    ``balance_groups``, keeps the others' relative weights, and names a label the split lacks."""
+    from motok_robot.errors import InputError
+    from motok_robot.planner.config import PlannerTrainConfig
+    from motok_robot.planner.data import PlannerData, TokenisedClip
+
+    def clip(cid, action, rows):
+        return TokenisedClip(cid, np.zeros(3, dtype=np.int64), np.zeros((12, 263), np.float16), rows, action)
+
+    clips = [clip(f"walk{i}", 0, [0]) for i in range(8)] + [clip("bow", 1, [1]), clip("bow@1", 1, [1]), clip("cmu", -1, [2])]
+    data = PlannerData(clips, torch.zeros(3, 3), 4, 8)
+    labels = ["walk", "bow"]
+    for balance in (0.0, 0.5):
+        p = data.sampling_probabilities(balance, {"bow": 0.3}, labels)
+        assert p.sum() == pytest.approx(1.0)
+        assert p[8:10].sum() == pytest.approx(0.3)
+        plain = data.sampling_probabilities(balance) if balance else np.full(len(clips), 1 / len(clips))
+        rest = np.r_[0:8, 10]
+        np.testing.assert_allclose(p[rest] / p[rest].sum(), plain[rest] / plain[rest].sum())
+    with pytest.raises(InputError, match=r"action_share names 'kick', which no clip has \(labels there: bow, walk\)"):
+        data.sampling_probabilities(0.5, {"kick": 0.1}, labels)
+    with pytest.raises(InputError, match=r"action_share\['bow'\] must be a number in \(0, 1\)"):
+        PlannerTrainConfig(action_share={"bow": 1.5}).validate("ar")
+
+
+def test_balance_groups_and_action_share_train_and_are_checked(runs, tmp_path):
     from motok_robot.errors import InputError
     from motok_robot.planner.train import train_planner
 
@@ -451,10 +477,16 @@ def test_balance_groups_trains_and_is_checked(runs, tmp_path):
         train_planner(tmp_path / "none", tmp_path / "none", "ar", tmp_path / "run", train_overrides={"balance_groups": 2})
     out = train_planner(runs / "data", runs / "tok", "ar", tmp_path / "balanced", seed=1,
                         planner_overrides=TINY_PLANNER["planner"],
-                        train_overrides={**TINY_PLANNER["train"], "steps": 2, "val_every": 2, "balance_groups": 1.0})
+                        train_overrides={**TINY_PLANNER["train"], "steps": 2, "val_every": 2, "balance_groups": 1.0,
+                                         "action_share": {"run": 0.5}})
     saved = json.loads((out / "config.json").read_text())
     assert saved["train"]["balance_groups"] == 1.0
+    assert saved["train"]["action_share"] == {"run": 0.5}
     assert (out / "model.safetensors").is_file()
+    with pytest.raises(InputError, match="action_share names 'bow', which no clip has"):
+        train_planner(runs / "data", runs / "tok", "ar", tmp_path / "no_bows", seed=1,
+                      planner_overrides=TINY_PLANNER["planner"],
+                      train_overrides={**TINY_PLANNER["train"], "steps": 2, "action_share": {"bow": 0.1}})
 
 
 def test_init_from_fine_tunes_a_trained_planner(runs, tmp_path, capsys):

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from motok_robot.config_utils import dataclass_from_dict, dataclass_to_dict
-from motok_robot.data.groups import check_balance
+from motok_robot.data.groups import check_action_shares, check_balance
 from motok_robot.errors import InputError
 
 PLANNER_KINDS = ("masked", "ar")
@@ -170,6 +170,11 @@ class PlannerTrainConfig:
     #: against 28 bows and 2 kicks); 1 = every group equally often; 0.5 = square-root balancing
     #: (both shipped planners).  Weights from :func:`motok_robot.data.groups.balanced_weights`.
     balance_groups: float = 0.0
+    #: action labels whose clips together hold a fixed share of the draws, e.g. ``{"bow": 0.05}``
+    #: (the 28 bow sequences get 1.3 % under ``balance_groups`` 0.5); the other clips keep their
+    #: relative weights in the rest.  Empty = off.  As the tokenizer's ``action_share``
+    #: (:func:`motok_robot.data.groups.with_action_shares`).
+    action_share: dict[str, float] = field(default_factory=dict)
     #: planners with ``end_embedding``: this fraction of the training samples gets the "end
     #: unknown" entry although its crop ends with the clip, so the AR planner also learns to
     #: close a motion with [END] when no length is given (``plan(n_tokens=None)``).  None = the
@@ -200,6 +205,7 @@ class PlannerTrainConfig:
         if kind == "ar" and self.masked_loss_average != "token":
             raise InputError("train config: masked_loss_average is for the masked planner")
         check_balance(self.balance_groups, "train config")
+        self.action_share = check_action_shares(self.action_share, "train config")
         if self.end_unknown_prob is None:
             self.end_unknown_prob = AR_END_UNKNOWN_PROB if kind == "ar" else 0.0
         if not 0.0 <= self.end_unknown_prob <= 1.0:

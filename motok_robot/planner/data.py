@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from motok_robot.data.groups import balanced_weights, clip_action
+from motok_robot.data.groups import balanced_weights, clip_action, with_action_shares
 from motok_robot.errors import InputError
 from motok_robot.planner.conditions import Conditions, LocalConditions, random_local_conditions, stack_local
 from motok_robot.planner.config import ControlConfig
@@ -154,13 +154,23 @@ class PlannerData:
             return ("text", clip.text_rows[0])
         return ("clip", clip.clip_id.split("@")[0])
 
-    def sampling_probabilities(self, balance: float) -> np.ndarray | None:
+    def sampling_probabilities(self, balance: float, action_share: dict[str, float] | None = None,
+                               action_labels: list[str] | None = None) -> np.ndarray | None:
         """Probability of drawing each clip when a group of ``n`` clips is drawn with total weight
-        ``n ** (1 - balance)``: 0 = every clip equally often (returns None), 1 = every group
-        (action label or caption) equally often, 0.5 = square-root balancing."""
-        if balance == 0:
+        ``n ** (1 - balance)``: 0 = every clip equally often (returns None, unless
+        ``action_share`` is given), 1 = every group (action label or caption) equally often, 0.5 =
+        square-root balancing.  ``action_share`` (``{label: share}``, labels from
+        ``action_labels``, the planner's label list that ``TokenisedClip.action`` indexes) then
+        gives the clips of each named label that share of the draws."""
+        if balance == 0 and not action_share:
             return None
-        return balanced_weights([self.group_of(i) for i in range(len(self.clips))], balance)
+        groups = [self.group_of(i) for i in range(len(self.clips))]
+        weights = balanced_weights(groups, balance)
+        if not action_share:
+            return weights
+        labels = list(action_labels or [])
+        named = [("action", labels[g[1]]) if g[0] == "action" and 0 <= g[1] < len(labels) else g for g in groups]
+        return with_action_shares(weights, named, action_share, "planner train split")
 
     def batch(
         self,

@@ -177,7 +177,7 @@ def train_planner(
         val_data = train_data
     del tokenizer
 
-    draw_p = train_data.sampling_probabilities(train_cfg.balance_groups)
+    draw_p = train_data.sampling_probabilities(train_cfg.balance_groups, train_cfg.action_share, config.action_labels)
     model = build_planner(config).to(dev)
     if init_from is not None:
         with torch.no_grad():  # switched-on modules start at zero: the fine-tune starts from the named model
