@@ -483,10 +483,11 @@ def test_balance_groups_and_action_share_train_and_are_checked(runs, tmp_path):
     assert saved["train"]["balance_groups"] == 1.0
     assert saved["train"]["action_share"] == {"run": 0.5}
     assert (out / "model.safetensors").is_file()
-    with pytest.raises(InputError, match="action_share names 'bow', which no clip has"):
+    with pytest.raises(InputError, match=r"action_share names 'bow', which no clip of .* has \(labels there: run, walk\)"):
         train_planner(runs / "data", runs / "tok", "ar", tmp_path / "no_bows", seed=1,
                       planner_overrides=TINY_PLANNER["planner"],
                       train_overrides={**TINY_PLANNER["train"], "steps": 2, "action_share": {"bow": 0.1}})
+    assert not (tmp_path / "no_bows" / "config.json").exists()  # refused before the run folder is written
 
 
 def test_init_from_fine_tunes_a_trained_planner(runs, tmp_path, capsys):

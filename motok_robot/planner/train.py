@@ -157,6 +157,10 @@ def train_planner(
                          fps=int(getattr(tokenizer.config, "fps", config.fps)), text_dim=encoder.dim,
                          action_labels=action_labels_of(data_dir, "train"))
         config.validate()
+    unknown = [label for label in train_cfg.action_share if label not in config.action_labels]
+    if unknown:  # before the run folder is written and the clips are tokenised
+        raise InputError(f"train config: action_share names {unknown[0]!r}, which no clip of {data_dir} has "
+                         f"(labels there: {', '.join(sorted(config.action_labels)) or 'none'})")
     extra = {"train": to_dict(train_cfg),
              "tokenizer": record,
              "text_encoder": encoder.name, "data": str(Path(data_dir).resolve())}
