@@ -490,6 +490,32 @@ def test_balance_groups_and_action_share_train_and_are_checked(runs, tmp_path):
     assert not (tmp_path / "no_bows" / "config.json").exists()  # refused before the run folder is written
 
 
+def test_action_share_flag_and_resume_refuses_changed_settings(runs, tmp_path, capsys):
+    """``--action-share LABEL=SHARE`` sets train.action_share; --resume with the run's own settings
+    continues it, and with any other (a changed --config field, --action-share, --seed) is refused
+    naming the field, since a resumed run keeps its config.json (it used to drop them silently)."""
+    run = tmp_path / "ar"
+    (tmp_path / "other.json").write_text(json.dumps({**TINY_PLANNER, "train": {**TINY_PLANNER["train"], "batch_size": 3}}))
+
+    def args(seed="1", config=runs / "tiny.json", share="run=0.4"):
+        return ["train", "planner", "--data", str(runs / "data"), "--tokenizer", str(runs / "tok"), "--kind", "ar",
+                "--out", str(run), "--val-every", "2", "--seed", seed, "--config", str(config), "--action-share", share]
+
+    assert main(args() + ["--steps", "2"]) == 0
+    assert json.loads((run / "config.json").read_text())["train"]["action_share"] == {"run": 0.4}
+    assert main(args() + ["--steps", "4", "--resume"]) == 0  # the same settings continue the run
+    assert [int(r["step"]) for r in _metrics(run)] == [2, 4]
+    for changed, named in ((args(share="run=0.2"), "train.action_share is {'run': 0.4} (asked {'run': 0.2})"),
+                           (args(seed="2"), "train.seed is 1 (asked 2)"),
+                           (args(config=tmp_path / "other.json"), "train.batch_size is 4 (asked 3)")):
+        assert main(changed + ["--steps", "6", "--resume"]) == 2
+        err = capsys.readouterr().err
+        assert named in err and "start a new run in another --out" in err, err
+    assert [int(r["step"]) for r in _metrics(run)] == [2, 4]  # the refused commands trained nothing
+    assert main(args(share="run") + ["--steps", "2"]) == 2
+    assert "--action-share: expected LABEL=SHARE such as bow=0.05 (got 'run')" in capsys.readouterr().err
+
+
 def test_init_from_fine_tunes_a_trained_planner(runs, tmp_path, capsys):
     """--init-from starts from the named run's weights and architecture with a fresh schedule: with
     zero steps' worth of learning rate the weights come back unchanged, with some they move; the

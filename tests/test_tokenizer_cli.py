@@ -135,7 +135,7 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
 
 
 def test_action_share_flag_parses_label_equals_share():
-    from motok_robot.tokenizer.cli import parse_action_shares
+    from motok_robot.data.groups import parse_action_shares
 
     assert parse_action_shares(["bow=0.05", "walk-left=0.1"]) == {"bow": 0.05, "walk-left": 0.1}
     for bad in ("=0.1", "bow=", "bow=a lot", "bow"):

@@ -101,6 +101,22 @@ def check_action_shares(shares: Any, where: str) -> dict[str, float]:
     return out
 
 
+def parse_action_shares(items: list[str]) -> dict[str, float]:
+    """``--action-share`` items, ``["bow=0.05", ...]``, as ``{"bow": 0.05}``; an error names an item that
+    is not LABEL=NUMBER (the shares themselves are checked by :func:`check_action_shares`)."""
+    shares: dict[str, float] = {}
+    for item in items:
+        label, sep, value = item.rpartition("=")
+        try:
+            share = float(value)
+        except ValueError:
+            share = None
+        if not sep or not label.strip() or share is None:
+            raise InputError(f"--action-share: expected LABEL=SHARE such as bow=0.05 (got {item!r})")
+        shares[label.strip()] = share
+    return shares
+
+
 def with_action_shares(weights: Sequence[float], groups: Sequence[Hashable], shares: dict[str, float],
                        where: str) -> np.ndarray:
     """Draw weights in which the items of each action label in ``shares`` (group

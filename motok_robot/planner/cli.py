@@ -36,6 +36,9 @@ def register(commands, groups) -> None:
     train.add_argument("--text-encoder", default=None, help="'minilm' (default) or 'clip:/path/to/clip'")
     train.add_argument("--config", type=Path, default=None,
                        help="JSON file with optional 'planner' and 'train' sections overriding the defaults")
+    train.add_argument("--action-share", nargs="+", default=None, metavar="LABEL=SHARE",
+                       help="draw the clips of an action label with this share of all clips (e.g. bow=0.05; "
+                            "train.action_share of --config)")
     train.add_argument("--device", default=None, help="torch device (default cpu)")
     train.set_defaults(func=_train)
 
@@ -87,6 +90,10 @@ def _train(args: argparse.Namespace) -> int:
             if value < 1:
                 raise InputError(f"--{name.replace('_', '-')} must be >= 1 (got {value})")
             train_over[key] = value
+    if args.action_share:
+        from motok_robot.data.groups import parse_action_shares
+
+        train_over["action_share"] = parse_action_shares(args.action_share)
     run = train_planner(args.data, args.tokenizer, args.kind, args.out, resume=args.resume, seed=args.seed,
                         planner_overrides=planner_over, train_overrides=train_over,
                         text_encoder=args.text_encoder, device=args.device, init_from=args.init_from)

@@ -76,6 +76,35 @@ def evaluate(model, data: PlannerData, cfg: PlannerTrainConfig, device) -> dict[
             "val_length_loss": totals["len_loss"] / n, "val_length_within_1": totals["len_ok"] / n}
 
 
+def _resume_conflicts(config: PlannerConfig, train_cfg: PlannerTrainConfig, planner_overrides: dict | None,
+                      train_overrides: dict | None, seed: int | None, text_encoder: str | None) -> list[str]:
+    """The settings a ``--resume`` command asks for that differ from the run's saved config, as
+    ``"section.field saved (asked ...)"``: a resumed run keeps its config, so a different value would
+    otherwise be dropped without a word.  ``steps`` may change (extending a run); the device may too."""
+    changed: list[str] = []
+
+    def compare(section: str, saved: dict, asked: dict, keys) -> None:
+        changed.extend(f"{section}.{key} is {saved.get(key)!r} (asked {asked.get(key)!r})"
+                       for key in keys if asked.get(key) != saved.get(key))
+
+    if planner_overrides:
+        saved = to_dict(config)
+        asked = to_dict(planner_config_from_dict({**saved, **planner_overrides, "kind": config.kind},
+                                                 where="--config 'planner'"))
+        compare("planner", saved, asked, planner_overrides)
+    train_asked = {key: value for key, value in (train_overrides or {}).items() if key not in ("steps", "device")}
+    if seed is not None:
+        train_asked["seed"] = int(seed)
+    if train_asked:
+        saved = to_dict(train_cfg)
+        asked_cfg = train_config_from_dict({**saved, **train_asked}, where="--config 'train'")
+        asked_cfg.validate(config.kind)
+        compare("train", saved, to_dict(asked_cfg), train_asked)
+    if text_encoder is not None and text_encoder != config.text_encoder:
+        changed.append(f"planner.text_encoder is {config.text_encoder!r} (asked {text_encoder!r})")
+    return changed
+
+
 def train_planner(
     data_dir: str | Path,
     tokenizer_run: str | Path,
@@ -111,6 +140,10 @@ def train_planner(
         train_cfg = train_config_from_dict(saved.get("train", {}), where=f"{out / CONFIG_FILE} 'train'")
         if config.kind != kind:
             raise InputError(f"--resume: {out} is a {config.kind!r} planner run, not {kind!r}")
+        changed = _resume_conflicts(config, train_cfg, planner_overrides, train_overrides, seed, text_encoder)
+        if changed:
+            raise InputError(f"--resume continues {out} with its own {CONFIG_FILE}, and the command asks for other "
+                             f"settings: {'; '.join(changed)}. Drop them, or start a new run in another --out")
         if train_overrides and "steps" in train_overrides:
             train_cfg.steps = int(train_overrides["steps"])  # allow extending a finished run
     else:

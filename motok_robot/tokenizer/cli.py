@@ -67,21 +67,6 @@ def register(commands, groups) -> None:
     rec.set_defaults(func=_reconstruct)
 
 
-def parse_action_shares(items: list[str]) -> dict[str, float]:
-    """``["bow=0.05", ...]`` as ``{"bow": 0.05}``; an error names an item that is not LABEL=NUMBER."""
-    shares: dict[str, float] = {}
-    for item in items:
-        label, sep, value = item.rpartition("=")
-        try:
-            share = float(value)
-        except ValueError:
-            share = None
-        if not sep or not label.strip() or share is None:
-            raise InputError(f"--action-share: expected LABEL=SHARE such as bow=0.05 (got {item!r})")
-        shares[label.strip()] = share
-    return shares
-
-
 def _train(args) -> int:
     from motok_robot.tokenizer.config import read_config_file, tokenizer_config_from_dict, train_config_from_dict
 
@@ -100,6 +85,8 @@ def _train(args) -> int:
     if args.only_actions:
         train_section["only_actions"] = list(args.only_actions)
     if args.action_share:
+        from motok_robot.data.groups import parse_action_shares
+
         train_section["action_share"] = parse_action_shares(args.action_share)
     if args.resume and any(key in train_section for key in ("init_from", "freeze_tokens", "only_actions", "action_share")):
         raise InputError("--resume continues with the run's own config.json; "
