@@ -79,8 +79,8 @@ def evaluate(model, data: PlannerData, cfg: PlannerTrainConfig, device) -> dict[
 def _resume_conflicts(config: PlannerConfig, train_cfg: PlannerTrainConfig, planner_overrides: dict | None,
                       train_overrides: dict | None, seed: int | None, text_encoder: str | None) -> list[str]:
     """The settings a ``--resume`` command asks for that differ from the run's saved config, as
-    ``"section.field saved (asked ...)"``: a resumed run keeps its config, so a different value would
-    otherwise be dropped without a word.  ``steps`` may change (extending a run); the device may too."""
+    ``"section.field is SAVED (asked ASKED)"``: a resumed run keeps its config, so a different value
+    would otherwise be dropped without a word.  ``steps`` may change (extending a run); the device may too."""
     changed: list[str] = []
 
     def compare(section: str, saved: dict, asked: dict, keys) -> None:
