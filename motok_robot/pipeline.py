@@ -423,11 +423,20 @@ def read_prompts(path, seconds: float | None = None, seed: int = 0) -> list[Prom
             raise InputError(f"--prompts {path}: the CSV has a header but no rows")
     else:
         for number, ln in numbered:
+            if _HEADERLESS_CSV_ROW.match(ln):
+                raise InputError(f"--prompts {path}: line {number}: {ln.strip()!r} looks like a CSV row "
+                                 "(text,seconds,seed) but the file has no header; start the file with the line "
+                                 "'text,seconds,seed', or drop the numbers to use --seconds / --seed")
             try:
                 specs.append(PromptSpec(check_text(ln), seconds, seed, number))
             except InputError as exc:
                 raise InputError(f"--prompts {path}: line {number}: {exc}") from None
     return specs
+
+
+#: a plain-list line that ends in CSV cells of numbers ("a person bows,,3", "a person bows,4"):
+#: without the header it would be read as the prompt text, numbers included
+_HEADERLESS_CSV_ROW = re.compile(r"^.+?,\s*[0-9.]*\s*(,\s*-?[0-9]*\s*)?$")
 
 
 def _parse_number(cell: str, kind, where: str):

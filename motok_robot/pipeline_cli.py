@@ -54,7 +54,7 @@ def register(commands, groups) -> None:
     parser.add_argument("--skeleton", default="bandai",
                         help="BVH skeleton of --motion: bandai, acrnn or a joint-map JSON (default bandai)")
     parser.add_argument("--prompts", type=Path, default=None, metavar="FILE",
-                        help="run every prompt of FILE (one per line, or CSV text,seconds,seed; rows without seconds or "
+                        help="run every prompt of FILE (one per line, or CSV with the header text,seconds,seed; rows without seconds or "
                              "seed take --seconds / --seed); writes OUT/summary.csv")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (new or empty)")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing, non-empty --out when done")

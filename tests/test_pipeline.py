@@ -478,6 +478,18 @@ def test_read_prompts_plain_and_errors(tmp_path):
     bad.write_text("text,seconds\n,2\n")
     with pytest.raises(InputError, match=r"line 2: text is empty"):
         read_prompts(bad)
+    # a CSV row without the header would run "a person bows,,3" as the prompt, with seed 0
+    headerless = tmp_path / "h.csv"
+    headerless.write_text("a person walks forward\na person bows,,3\n")
+    with pytest.raises(InputError, match=r"line 2: 'a person bows,,3' looks like a CSV row .* no header"):
+        read_prompts(headerless)
+    headerless.write_text('"a person bows",4\n')
+    with pytest.raises(InputError, match=r"line 1: .* looks like a CSV row"):
+        read_prompts(headerless)
+    # commas inside a prompt are text
+    commas = tmp_path / "c.txt"
+    commas.write_text("a person walks, then sits down\na person jumps, twice\n")
+    assert [s.text for s in read_prompts(commas)] == ["a person walks, then sits down", "a person jumps, twice"]
     empty = tmp_path / "e.txt"
     empty.write_text("# nothing\n\n")
     with pytest.raises(InputError, match="no prompts"):
