@@ -26,9 +26,9 @@ PROMPTS = {
     "wave_right_hand": ("a person waves the right hand", [], None),
     "raise_both_hands": ("a person raises both hands", [], None),
     "bow": ("a person bows", [], None),
-    # the generated walk (6.8 s), turn (4.6 s) and kick (1.8 s) at their estimated lengths, as
-    # `motok-robot run` picks them: the walk and kick pass once the balance repair has retargeted
-    # them with the ZMP term; the turn then still needs 1.12x the servo torque (README, Gallery)
+    # the generated walk, turn and kick at their estimated lengths (7.2, 4.4 and 1.8 s with the
+    # models shipped 2026-11-28), as `motok-robot run` picks them; the README's Gallery says
+    # which pass and which checks the others fail
     "walk_forward": ("a person walks forward", [], "estimated"),
     "walk_turn_left": ("a person walks and turns left", [], "estimated"),
     "kick": ("a person kicks with the right leg", [], "estimated"),

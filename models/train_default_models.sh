@@ -63,14 +63,15 @@ if [ "${TOKENIZER_STAGE2:-0}" = 1 ]; then
 fi
 # The masked planner is trained with the config defaults, then fine-tuned for 1,500 steps
 # (models/planner_masked_finetune.json: balanced sampling, balance_groups 0.5, so rare actions
-# such as the 28 bows are drawn more often; the end embedding switched on, starting at zero;
-# learning rate 1e-4), which is the shipped one. The AR planner's recipe is
+# such as the 28 bows are drawn more often; the bow group's share of the balanced draws fixed
+# at 5 % (action_share); the end embedding switched on, starting at zero; learning rate 1e-4;
+# training seed 1), which is the shipped one. The AR planner's recipe is
 # models/planner_ar_train.json: 6 layers, four token grids per clip and balance_groups 0.5 from
 # the start, the end embedding with end_horizon 8 (the count of tokens still to draw, shown
 # only in the last 8 tokens), training seed 1 (the shipped one of eight GPU runs; the training
 # seed alone moves its bows by several of 48 seeds). See models/MODEL_CARD.md, "The masked
-# planner fine-tuned with balanced sampling and the end embedding" and "The AR planner with a
-# capped end embedding".
+# planner fine-tuned with balanced sampling and the end embedding", "The masked planner's
+# fine-tune with a bow share" and "The AR planner with a capped end embedding".
 motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind masked \
   --out "$WORK/planner_masked" "${DEV[@]}" $(resume_flag "$WORK/planner_masked")
 FINETUNE=(--init-from "$WORK/planner_masked" --config models/planner_masked_finetune.json)
