@@ -45,6 +45,13 @@ def dataclass_to_dict(config: Any) -> dict[str, Any]:
     return out
 
 
+def changed_fields(section: str, saved: dict[str, Any], asked: dict[str, Any], keys) -> list[str]:
+    """``"section.key is SAVED (asked ASKED)"`` for each of ``keys`` whose asked value differs from
+    the saved one: what a ``--resume`` command would otherwise drop without a word."""
+    return [f"{section}.{key} is {saved.get(key)!r} (asked {asked.get(key)!r})"
+            for key in keys if asked.get(key) != saved.get(key)]
+
+
 def read_json_object(path: str | Path, what: str) -> dict:
     """The JSON object in ``path``; ``what`` names the file's role in messages ("--config", "joint map").
 

@@ -66,7 +66,22 @@ def test_train_resume_and_reconstruct(tmp_path, capsys):
     # an existing run is not overwritten; --resume extends it
     assert main(["train", "tokenizer", "--data", str(data), "--out", str(run), "--config", str(config), "--steps", "4"]) == 2
     assert "--resume" in capsys.readouterr().err
-    assert main(["train", "tokenizer", "--data", str(data), "--out", str(run), "--resume", "--steps", "6"]) == 0
+    # --resume keeps the run's config: a setting that differs from it is refused by name (it used to
+    # be dropped without a word for --seed and --batch-size), the same settings repeated are accepted
+    assert main(["train", "tokenizer", "--data", str(data), "--out", str(run), "--resume", "--steps", "6",
+                 "--seed", "3", "--config", str(config)]) == 2
+    err = capsys.readouterr().err
+    assert "train.seed is 0 (asked 3)" in err and "window" not in err and "Traceback" not in err
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({"tokenizer": {**TINY, "codebook_size": TINY["codebook_size"] * 2},
+                                 "train": {"lr": 0.5, "action_share": {"bow": 0.1}}}))
+    assert main(["train", "tokenizer", "--data", str(data), "--out", str(run), "--resume", "--config", str(other)]) == 2
+    err = capsys.readouterr().err
+    assert f"tokenizer.codebook_size is {TINY['codebook_size']} (asked {TINY['codebook_size'] * 2})" in err
+    assert "train.lr is" in err and "train.action_share is {} (asked {'bow': 0.1})" in err
+    assert [int(r["step"]) for r in csv.DictReader((run / "metrics.csv").open())] == [2, 4]
+    assert main(["train", "tokenizer", "--data", str(data), "--out", str(run), "--resume", "--steps", "6",
+                 "--config", str(config)]) == 0
     rows = list(csv.DictReader((run / "metrics.csv").open()))
     assert [int(r["step"]) for r in rows] == [2, 4, 6]
 
@@ -127,7 +142,7 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
     assert "train split has no clip of action ['bow'] (labels there: none)" in capsys.readouterr().err
     assert main(["train", "tokenizer", "--data", str(data), "--out", str(tmp_path / "r3"), "--resume",
                  "--only-actions", "bow"]) == 2
-    assert "drop --init-from / --freeze-tokens / --only-actions / --action-share" in capsys.readouterr().err
+    assert "r3: nothing to resume (train_state.safetensors not found)" in capsys.readouterr().err
     assert main(["train", "tokenizer", "--data", str(data), "--out", str(tmp_path / "r4"), "--action-share", "bow"]) == 2
     assert "--action-share: expected LABEL=SHARE such as bow=0.05 (got 'bow')" in capsys.readouterr().err
     assert main(["train", "tokenizer", "--data", str(data), "--out", str(tmp_path / "r4"), "--action-share", "bow=0.1"]) == 2

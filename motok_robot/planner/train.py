@@ -21,6 +21,7 @@ import torch
 from tqdm import tqdm
 
 from motok_robot.checkpoint import WEIGHTS_FILE, load_checked_weights, load_training_state, save_training_state
+from motok_robot.config_utils import changed_fields
 from motok_robot.errors import InputError
 from motok_robot.planner.checkpoint import (
     CONFIG_FILE, atomic_write_text, build_planner, read_run_config, save_planner_weights, tokenizer_mismatch,
@@ -82,16 +83,11 @@ def _resume_conflicts(config: PlannerConfig, train_cfg: PlannerTrainConfig, plan
     ``"section.field is SAVED (asked ASKED)"``: a resumed run keeps its config, so a different value
     would otherwise be dropped without a word.  ``steps`` may change (extending a run); the device may too."""
     changed: list[str] = []
-
-    def compare(section: str, saved: dict, asked: dict, keys) -> None:
-        changed.extend(f"{section}.{key} is {saved.get(key)!r} (asked {asked.get(key)!r})"
-                       for key in keys if asked.get(key) != saved.get(key))
-
     if planner_overrides:
         saved = to_dict(config)
         asked = to_dict(planner_config_from_dict({**saved, **planner_overrides, "kind": config.kind},
                                                  where="--config 'planner'"))
-        compare("planner", saved, asked, planner_overrides)
+        changed += changed_fields("planner", saved, asked, planner_overrides)
     train_asked = {key: value for key, value in (train_overrides or {}).items() if key not in ("steps", "device")}
     if seed is not None:
         train_asked["seed"] = int(seed)
@@ -99,7 +95,7 @@ def _resume_conflicts(config: PlannerConfig, train_cfg: PlannerTrainConfig, plan
         saved = to_dict(train_cfg)
         asked_cfg = train_config_from_dict({**saved, **train_asked}, where="--config 'train'")
         asked_cfg.validate(config.kind)
-        compare("train", saved, to_dict(asked_cfg), train_asked)
+        changed += changed_fields("train", saved, to_dict(asked_cfg), train_asked)
     if text_encoder is not None and text_encoder != config.text_encoder:
         changed.append(f"planner.text_encoder is {config.text_encoder!r} (asked {text_encoder!r})")
     return changed

@@ -88,18 +88,19 @@ def _train(args) -> int:
         from motok_robot.data.groups import parse_action_shares
 
         train_section["action_share"] = parse_action_shares(args.action_share)
-    if args.resume and any(key in train_section for key in ("init_from", "freeze_tokens", "only_actions", "action_share")):
-        raise InputError("--resume continues with the run's own config.json; "
-                         "drop --init-from / --freeze-tokens / --only-actions / --action-share")
     where = str(args.config) if args.config else "defaults"
     tok_cfg = tokenizer_config_from_dict(tok_section, where=f"{where} 'tokenizer'")
     train_cfg = train_config_from_dict(train_section, where=f"{where} 'train'")
-    if args.resume and args.config:
-        raise InputError("--resume continues with the run's own config.json; drop --config")
 
     import torch  # noqa: F401  (heavy imports only now)
 
-    from motok_robot.tokenizer.train import dataset_statistics, load_split, train_tokenizer
+    from motok_robot.tokenizer.train import dataset_statistics, load_split, resume_conflicts, train_tokenizer
+
+    if args.resume:
+        changed = resume_conflicts(args.out, tok_section, train_section)
+        if changed:
+            raise InputError(f"--resume continues {args.out} with its own config.json, and the command asks for other "
+                             f"settings: {'; '.join(changed)}. Drop them, or start a new run in another --out")
 
     train_clips = load_split(args.data, "train")
     val_clips = load_split(args.data, "val")

@@ -28,6 +28,7 @@ from safetensors.torch import load_file
 from tqdm import tqdm
 
 from motok_robot.data.groups import action_labels_shown, balanced_weights, clip_group, with_action_shares
+from motok_robot.config_utils import changed_fields
 from motok_robot.errors import InputError
 from motok_robot.tokenizer.checkpoint import CONFIG_FILE, WEIGHTS_FILE, atomic_save_tensors, read_run_config, save_tokenizer
 from motok_robot.tokenizer.config import TokenizerConfig, TrainConfig, to_dict, tokenizer_config_from_dict, train_config_from_dict
@@ -251,6 +252,27 @@ def evaluate_windows(model: MoTok, windows: torch.Tensor, mask: torch.Tensor, st
         "val_usage": float(stats["usage"]),
         "val_perplexity": float(stats["perplexity"]),
     }
+
+
+def resume_conflicts(out: str | Path, tokenizer_section: dict[str, Any], train_section: dict[str, Any]) -> list[str]:
+    """The settings a ``--resume`` command asks for (its ``--config`` sections and flags) that differ
+    from run ``out``'s saved config.json, as ``"section.field is SAVED (asked ASKED)"``: a resumed run
+    keeps its config, so a different value would otherwise be dropped without a word.  The fields of
+    :data:`RESUME_OVERRIDES` may change; asking for a saved value again is no conflict."""
+    out = Path(out)
+    if not (out / STATE_FILE).is_file():
+        raise InputError(f"{out}: nothing to resume ({STATE_FILE} not found)")
+    saved = read_run_config(out)
+    changed: list[str] = []
+    sections = (("tokenizer", tokenizer_section, tokenizer_config_from_dict),
+                ("train", {k: v for k, v in train_section.items() if k not in RESUME_OVERRIDES}, train_config_from_dict))
+    for name, asked_values, from_dict in sections:
+        if not asked_values:
+            continue
+        before = to_dict(from_dict(saved.get(name) or {}, where=f"{out / CONFIG_FILE} {name!r}"))
+        after = to_dict(from_dict({**before, **asked_values}, where=f"--config {name!r}"))
+        changed += changed_fields(name, before, after, asked_values)
+    return changed
 
 
 # -- training loop -------------------------------------------------------------------------
