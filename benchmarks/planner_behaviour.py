@@ -1,14 +1,15 @@
 """Behaviour pass rates of the planners over many seeds (the tests check seed 0, and floors over 0-7).
 
 Run: python benchmarks/planner_behaviour.py [--planner masked ar] [--seeds 12] [--first-seed 0] [--seconds S|auto]
-       [--cfg S] [--steps N] [--decoder-steps N] [--decoder-seed K ...] [--data runs/prepared [--reference-only]]
+       [--cfg S] [--steps N] [--temperature T] [--decoder-steps N] [--decoder-seed K ...]
+       [--data runs/prepared [--reference-only]]
        [--threads 2] [--out benchmarks/results/planner_behaviour.json]
 
 For every planner and seed ``F..F+N-1`` (``--first-seed``, default 0) it generates the five prompts of
 :mod:`motok_robot.eval.behaviour` and runs its six checks (walk, a planted foot, run faster than
 walk, wave the right hand, raise both hands, bow and come back up) on the configured models
-(``models/`` or ``$MOTOK_ROBOT_MODELS``), with the default sampling settings unless ``--cfg`` (guidance scale) or ``--steps``
-(the masked planner's unmasking iterations) is given, at the checks' lengths (6 s for the walk, run and wave; the planner's own length, from its
+(``models/`` or ``$MOTOK_ROBOT_MODELS``), with the default sampling settings unless ``--cfg`` (guidance scale), ``--steps``
+(the masked planner's unmasking iterations) or ``--temperature`` (0 = greedy) is given, at the checks' lengths (6 s for the walk, run and wave; the planner's own length, from its
 length estimator, for raising both hands and bowing); ``--seconds`` sets one length for all (a
 number, or ``auto`` for the planner's own). ``--decoder-steps`` sets the tokenizer decoder's DDIM
 steps; ``--decoder-seed K`` decodes every seed's tokens from the noise of seed K instead of the
@@ -45,7 +46,7 @@ DETAILED = ("bow",)
 
 def planner_rows(planners: list[str], seeds: range, th: B.BehaviourThresholds, cfg: float | None,
                  steps: int | None = None, decoder_steps: int | None = None,
-                 decoder_seed: int | None = None) -> list[dict]:
+                 decoder_seed: int | None = None, temperature: float | None = None) -> list[dict]:
     from motok_robot.planner.generate import MotionGenerator
 
     extra: dict = {}
@@ -53,6 +54,8 @@ def planner_rows(planners: list[str], seeds: range, th: B.BehaviourThresholds, c
         extra["decoder_steps"] = decoder_steps
     if decoder_seed is not None:
         extra["decoder_seed"] = decoder_seed
+    if temperature is not None:
+        extra["temperature"] = temperature
 
     rows = []
     for kind in planners:
@@ -174,6 +177,8 @@ def main() -> int:
     parser.add_argument("--cfg", type=float, default=None, help="guidance scale (default: the sampling default)")
     parser.add_argument("--steps", type=int, default=None,
                         help="masked planner unmasking iterations (default: the sampling default, 10)")
+    parser.add_argument("--temperature", type=float, default=None,
+                        help="sampling temperature, 0 = greedy (default: the sampling default, 1)")
     parser.add_argument("--decoder-steps", type=int, default=None,
                         help="tokenizer decoder DDIM steps (default: the tokenizer's, 20)")
     parser.add_argument("--decoder-seed", type=int, nargs="+", default=None,
@@ -194,6 +199,8 @@ def main() -> int:
         parser.error("--steps must be >= 1")
     if args.decoder_steps is not None and args.decoder_steps < 1:
         parser.error("--decoder-steps must be >= 1")
+    if args.temperature is not None and not args.temperature >= 0:
+        parser.error("--temperature must be >= 0")
     if args.decoder_seed is not None and (min(args.decoder_seed) < 0 or len(set(args.decoder_seed)) < len(args.decoder_seed)):
         parser.error("--decoder-seed: seeds must be >= 0 and distinct")
     seeds = range(args.first_seed, args.first_seed + args.seeds)
@@ -218,7 +225,7 @@ def main() -> int:
     rows = []
     for kind in [] if args.reference_only else args.planner:
         for noise in noises:
-            rows += planner_rows([kind], seeds, th, args.cfg, args.steps, args.decoder_steps, noise)
+            rows += planner_rows([kind], seeds, th, args.cfg, args.steps, args.decoder_steps, noise, args.temperature)
     summary = noise_summary(rows)
     if args.data is not None:
         rows += reference_rows(args.data, noises, args.decoder_steps)
@@ -235,13 +242,15 @@ def main() -> int:
     else:
         title = (f"Behaviour checks passed, seeds {seeds[0]}-{seeds[-1]}; walk, run, wave {length(th.seconds)}, hands "
                  f"and bow {length(th.action_seconds)}; guidance {'default' if args.cfg is None else args.cfg}; "
-                 f"masked steps {'default' if args.steps is None else args.steps}; {decoder}")
+                 f"masked steps {'default' if args.steps is None else args.steps}; "
+                 f"temperature {'default' if args.temperature is None else args.temperature}; {decoder}")
     print_table(rows, ["rows", *B.CHECKS], title=title)
     if summary:
         print_table(summary, ["rows", *B.CHECKS], title="Seeds whose token plan passes under every / some / no decoder noise "
                     "(pass rate over all plans and noises)")
     path = write_json(args.out, {"benchmark": "planner_behaviour", "seeds": 0 if args.reference_only else args.seeds,
                                  "first_seed": args.first_seed, "cfg_scale": args.cfg, "steps": args.steps,
+                                 "temperature": args.temperature,
                                  "decoder_steps": args.decoder_steps, "decoder_seed": args.decoder_seed, "thresholds": asdict(th),
                                  "rows": rows, "noise_summary": summary}, threads=args.threads)
     print(f"wrote {path}")

@@ -225,6 +225,9 @@ def test_planner_behaviour_counts_passes_per_check_and_passes_the_lengths(monkey
     assert asked_steps == {3}
     assert {seed for _, _, seed, _ in asked} == {1, 2}
     assert all(extra == {} for extra in asked_extra)  # the generator's own decoding by default
+    asked_extra.clear()  # --temperature reaches every generation
+    planner_behaviour.planner_rows(["ar"], range(1), B.BehaviourThresholds(), cfg=None, temperature=0.4)
+    assert asked_extra and all(extra == {"temperature": 0.4} for extra in asked_extra)
 
 
 def test_planner_behaviour_decoder_seed_decodes_every_seed_from_one_noise(monkeypatch):
