@@ -27,8 +27,8 @@ import torch
 from safetensors.torch import load_file
 from tqdm import tqdm
 
-from motok_robot.data.groups import action_labels_shown, balanced_weights, clip_group, with_action_shares
 from motok_robot.config_utils import changed_fields
+from motok_robot.data.groups import action_labels_shown, balanced_weights, clip_group, with_action_shares
 from motok_robot.errors import InputError
 from motok_robot.tokenizer.checkpoint import CONFIG_FILE, WEIGHTS_FILE, atomic_save_tensors, read_run_config, save_tokenizer
 from motok_robot.tokenizer.config import TokenizerConfig, TrainConfig, to_dict, tokenizer_config_from_dict, train_config_from_dict
