@@ -377,6 +377,11 @@ def check_playback(playback: str, port: str | None) -> None:
         raise InputError(f"a serial port ({port}) was given with playback {playback!r}; use playback='port'")
 
 
+#: a plain-list line that ends in CSV cells of numbers ("a person bows,,3", "a person bows,4"):
+#: without the header it would be read as the prompt text, numbers included
+_HEADERLESS_CSV_ROW = re.compile(r"^.+?,\s*[0-9.]*\s*(,\s*-?[0-9]*\s*)?$")
+
+
 def read_prompts(path, seconds: float | None = None, seed: int = 0) -> list[PromptSpec]:
     """Prompts of a ``--prompts`` file.
 
@@ -432,11 +437,6 @@ def read_prompts(path, seconds: float | None = None, seed: int = 0) -> list[Prom
             except InputError as exc:
                 raise InputError(f"--prompts {path}: line {number}: {exc}") from None
     return specs
-
-
-#: a plain-list line that ends in CSV cells of numbers ("a person bows,,3", "a person bows,4"):
-#: without the header it would be read as the prompt text, numbers included
-_HEADERLESS_CSV_ROW = re.compile(r"^.+?,\s*[0-9.]*\s*(,\s*-?[0-9]*\s*)?$")
 
 
 def _parse_number(cell: str, kind, where: str):

@@ -469,23 +469,17 @@ def test_read_prompts_plain_and_errors(tmp_path):
     mixed.write_text("text,seconds,seed\na person walks,,\na person bows,4,1\na person waves,3,\n")
     assert [(s.seconds, s.seed) for s in read_prompts(mixed, seconds=2.0, seed=5)] == [(2.0, 5), (4.0, 1), (3.0, 5)]
     bad = tmp_path / "bad.csv"
-    bad.write_text("text,seconds,seed\na person walks,-2,0\n")
-    with pytest.raises(InputError, match=r"line 2: seconds must be positive"):
-        read_prompts(bad)
-    bad.write_text("text,seconds,seed\na person walks,2,x\n")
-    with pytest.raises(InputError, match=r"line 2: seed: 'x' is not an integer"):
-        read_prompts(bad)
-    bad.write_text("text,seconds\n,2\n")
-    with pytest.raises(InputError, match=r"line 2: text is empty"):
-        read_prompts(bad)
-    # a CSV row without the header would run "a person bows,,3" as the prompt, with seed 0
-    headerless = tmp_path / "h.csv"
-    headerless.write_text("a person walks forward\na person bows,,3\n")
-    with pytest.raises(InputError, match=r"line 2: 'a person bows,,3' looks like a CSV row .* no header"):
-        read_prompts(headerless)
-    headerless.write_text('"a person bows",4\n')
-    with pytest.raises(InputError, match=r"line 1: .* looks like a CSV row"):
-        read_prompts(headerless)
+    for content, message in (
+        ("text,seconds,seed\na person walks,-2,0\n", r"line 2: seconds must be positive"),
+        ("text,seconds,seed\na person walks,2,x\n", r"line 2: seed: 'x' is not an integer"),
+        ("text,seconds\n,2\n", r"line 2: text is empty"),
+        # a CSV row without the header would run "a person bows,,3" as the prompt, with seed 0
+        ("a person walks forward\na person bows,,3\n", r"line 2: 'a person bows,,3' looks like a CSV row .* no header"),
+        ('"a person bows",4\n', r"line 1: .* looks like a CSV row"),
+    ):
+        bad.write_text(content)
+        with pytest.raises(InputError, match=message):
+            read_prompts(bad)
     # commas inside a prompt are text
     commas = tmp_path / "c.txt"
     commas.write_text("a person walks, then sits down\na person jumps, twice\n")
