@@ -254,14 +254,18 @@ def evaluate_windows(model: MoTok, windows: torch.Tensor, mask: torch.Tensor, st
     }
 
 
+def _require_resumable(out: Path) -> None:
+    if not (out / STATE_FILE).is_file():
+        raise InputError(f"{out}: nothing to resume ({STATE_FILE} not found)")
+
+
 def resume_conflicts(out: str | Path, tokenizer_section: dict[str, Any], train_section: dict[str, Any]) -> list[str]:
     """The settings a ``--resume`` command asks for (its ``--config`` sections and flags) that differ
     from run ``out``'s saved config.json, as ``"section.field is SAVED (asked ASKED)"``: a resumed run
     keeps its config, so a different value would otherwise be dropped without a word.  The fields of
     :data:`RESUME_OVERRIDES` may change; asking for a saved value again is no conflict."""
     out = Path(out)
-    if not (out / STATE_FILE).is_file():
-        raise InputError(f"{out}: nothing to resume ({STATE_FILE} not found)")
+    _require_resumable(out)
     saved = read_run_config(out)
     changed: list[str] = []
     sections = (("tokenizer", tokenizer_section, tokenizer_config_from_dict),
@@ -302,8 +306,7 @@ def train_tokenizer(
     cfg = train_config or TrainConfig()
     state_path = out / STATE_FILE
     if resume:
-        if not state_path.is_file():
-            raise InputError(f"{out}: nothing to resume ({STATE_FILE} not found)")
+        _require_resumable(out)
         saved = read_run_config(out)
         tok_cfg = tokenizer_config_from_dict(saved["tokenizer"], where=f"{out / CONFIG_FILE} 'tokenizer'")
         saved_train = dict(saved.get("train") or {})
