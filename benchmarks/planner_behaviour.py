@@ -166,6 +166,20 @@ def reference_rows(data: Path, decoder_seeds: list[int | None] = (None,), decode
     return rows
 
 
+def clip_round_trips(reference: list[dict]) -> list[dict]:
+    """Per clip of the :data:`DETAILED` labels: whether the real clip passes its check and under how
+    many of the decoder noises its tokenizer round trip does (from :func:`reference_rows`' rows);
+    clips that rarely survive the round trip are candidates for a planner's ``exclude_clips``."""
+    real, *decoded = reference
+    out = []
+    for k, clip in enumerate(real["clips"]):
+        passes = [row["clips"][k]["passed"] for row in decoded]
+        out.append({"rows": clip["clip"], "label": clip["label"], "real": "pass" if clip["passed"] else "MISS",
+                    "round trip": f"{sum(passes)}/{len(passes)}", "round_trip_passes": sum(passes),
+                    "noises": len(passes)})
+    return out
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--planner", nargs="+", choices=("masked", "ar"), default=["masked", "ar"])
@@ -227,8 +241,11 @@ def main() -> int:
         for noise in noises:
             rows += planner_rows([kind], seeds, th, args.cfg, args.steps, args.decoder_steps, noise, args.temperature)
     summary = noise_summary(rows)
+    per_clip = []
     if args.data is not None:
-        rows += reference_rows(args.data, noises, args.decoder_steps)
+        reference = reference_rows(args.data, noises, args.decoder_steps)
+        rows += reference
+        per_clip = clip_round_trips(reference)
     def length(s: float | None) -> str:
         return "own length" if s is None else f"{s:g} s"
 
@@ -248,11 +265,15 @@ def main() -> int:
     if summary:
         print_table(summary, ["rows", *B.CHECKS], title="Seeds whose token plan passes under every / some / no decoder noise "
                     "(pass rate over all plans and noises)")
+    if per_clip:
+        print_table(per_clip, ["rows", "label", "real", "round trip"],
+                    title="Per clip: the real clip's check, and the decoder noises under which its round trip passes")
     path = write_json(args.out, {"benchmark": "planner_behaviour", "seeds": 0 if args.reference_only else args.seeds,
                                  "first_seed": args.first_seed, "cfg_scale": args.cfg, "steps": args.steps,
                                  "temperature": args.temperature,
                                  "decoder_steps": args.decoder_steps, "decoder_seed": args.decoder_seed, "thresholds": asdict(th),
-                                 "rows": rows, "noise_summary": summary}, threads=args.threads)
+                                 "rows": rows, "noise_summary": summary, "clip_round_trips": per_clip},
+                      threads=args.threads)
     print(f"wrote {path}")
     return 0
 

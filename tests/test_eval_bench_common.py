@@ -287,15 +287,23 @@ def test_planner_behaviour_noise_summary_counts_plans_passing_under_every_some_n
 
 def test_planner_behaviour_reference_only_loads_no_planner(tmp_path, monkeypatch, capsys):
     """``--reference-only``: the real clips and their round trip under each decoder noise, no
-    planner row (so a candidate tokenizer can be compared alone); without ``--data`` it is refused."""
+    planner row (so a candidate tokenizer can be compared alone), and per bow clip the noises its
+    round trip passes under; without ``--data`` it is refused."""
     import planner_behaviour
 
     monkeypatch.setattr(planner_behaviour, "planner_rows", lambda *a, **k: pytest.fail("a planner was run"))
     seen = {}
 
+    def clips(*passed):
+        return [{"clip": f"bow_{k}", "label": "bow", "passed": p} for k, p in enumerate(passed)]
+
     def reference_rows(data, noises, decoder_steps):
         seen.update(data=data, noises=list(noises), steps=decoder_steps)
-        return [{"rows": "the same clips through the tokenizer", "model": "tok", "bow": "9/15"}]
+        return [{"rows": "real Bandai clips", "model": str(data), "bow": "2/3", "clips": clips(True, True, False)},
+                {"rows": "the same clips through the tokenizer, decoder noise 0", "model": "tok", "bow": "2/3",
+                 "clips": clips(True, False, True)},
+                {"rows": "the same clips through the tokenizer, decoder noise 3", "model": "tok", "bow": "1/3",
+                 "clips": clips(True, False, False)}]
 
     monkeypatch.setattr(planner_behaviour, "reference_rows", reference_rows)
     (tmp_path / "index.jsonl").write_text("")
@@ -306,8 +314,11 @@ def test_planner_behaviour_reference_only_loads_no_planner(tmp_path, monkeypatch
     assert planner_behaviour.main() == 0
     assert seen == {"data": tmp_path, "noises": [0, 3], "steps": None}
     result = json.loads(out.read_text())
-    assert result["seeds"] == 0 and result["noise_summary"] == [] and [r["bow"] for r in result["rows"]] == ["9/15"]
-    assert "Real clips and their tokenizer round trip" in capsys.readouterr().out
+    assert result["seeds"] == 0 and result["noise_summary"] == [] and [r["bow"] for r in result["rows"]] == ["2/3", "2/3", "1/3"]
+    assert [(c["rows"], c["real"], c["round trip"]) for c in result["clip_round_trips"]] == [
+        ("bow_0", "pass", "2/2"), ("bow_1", "pass", "0/2"), ("bow_2", "MISS", "1/2")]
+    printed = capsys.readouterr().out
+    assert "Real clips and their tokenizer round trip" in printed and "bow_1" in printed
     monkeypatch.setattr(sys, "argv", ["planner_behaviour.py", "--reference-only"])
     with pytest.raises(SystemExit) as stop:
         planner_behaviour.main()

@@ -383,28 +383,32 @@ def test_by_default_the_latest_weights_are_kept(runs, tmp_path, monkeypatch):
     assert kept and all(torch.equal(latest[k], v) for k, v in kept.items())
 
 
+class _FrameCounter:
+    """A "tokenizer" whose tokens say how many frames it was given."""
+
+    frames_per_token = 4
+
+    def parameters(self):
+        yield torch.zeros(1)
+
+    def encode(self, feats):
+        return torch.full((1, feats.shape[1] // 4), feats.shape[1], dtype=torch.long)
+
+
+class _ZeroTexts:
+    name, dim = "fake", 3
+
+    def encode(self, texts):
+        return torch.zeros(len(texts), 3)
+
+
 def test_token_phases_add_shifted_token_grids(runs, tmp_path):
     """``phases`` > 1 tokenises every clip again from frames 1.. on: one more sequence per offset,
     whose features are the clip's own shifted by that many frames (views, not copies)."""
     from motok_robot.errors import InputError
     from motok_robot.planner.data import load_planner_data, open_dataset
 
-    class FrameCounter:  # a "tokenizer" whose tokens say how many frames it was given
-        frames_per_token = 4
-
-        def parameters(self):
-            yield torch.zeros(1)
-
-        def encode(self, feats):
-            return torch.full((1, feats.shape[1] // 4), feats.shape[1], dtype=torch.long)
-
-    class Texts:
-        name, dim = "fake", 3
-
-        def encode(self, texts):
-            return torch.zeros(len(texts), 3)
-
-    data = load_planner_data(runs / "data", "train", FrameCounter(), "fake", Texts(), tmp_path, [], 16, phases=3)
+    data = load_planner_data(runs / "data", "train", _FrameCounter(), "fake", _ZeroTexts(), tmp_path, [], 16, phases=3)
     dataset = open_dataset(runs / "data", "train")
     by_id = {c.clip_id: c for c in data.clips}
     assert set(by_id) == {f"{cid}{suffix}" for cid in dataset.clip_ids for suffix in ("", "@1", "@2")}
@@ -418,7 +422,51 @@ def test_token_phases_add_shifted_token_grids(runs, tmp_path):
             assert clip.text_rows == by_id[cid].text_rows
             assert offset == 0 or np.shares_memory(clip.features, by_id[cid].features)
     with pytest.raises(InputError, match="token phases must be in 1..4"):
-        load_planner_data(runs / "data", "train", FrameCounter(), "fake", Texts(), tmp_path, [], 16, phases=5)
+        load_planner_data(runs / "data", "train", _FrameCounter(), "fake", _ZeroTexts(), tmp_path, [], 16, phases=5)
+
+
+def test_exclude_clips_leaves_out_the_clips_their_mirrors_and_phases(runs, tmp_path, capsys):
+    """``exclude_clips`` drops the named clips, every clip mirrored from one of them and their
+    token-phase copies, and nothing else; a name that is not a clip of the split is an error
+    naming it, raised by ``train planner`` before it writes the run folder."""
+    import shutil
+
+    from motok_robot.errors import InputError
+    from motok_robot.planner.data import load_planner_data
+
+    data = tmp_path / "data"
+    shutil.copytree(runs / "data", data)
+    for sub, ext in (("features", ".npy"), ("joints", ".npy"), ("texts", ".txt")):
+        shutil.copy(data / sub / f"run_a{ext}", data / sub / f"mirror__run_a{ext}")
+    record = next(json.loads(line) for line in (data / "index.jsonl").read_text().splitlines()
+                  if json.loads(line)["id"] == "run_a")
+    with open(data / "index.jsonl", "a") as fh:
+        fh.write(json.dumps({**record, "id": "mirror/run_a", "mirror_of": "run_a"}) + "\n")
+    with open(data / "splits" / "train.txt", "a") as fh:
+        fh.write("\nmirror/run_a\n")
+
+    def ids(exclude):
+        loaded = load_planner_data(data, "train", _FrameCounter(), "fake", _ZeroTexts(), tmp_path / "cache", [], 16,
+                                   phases=2, exclude=exclude)
+        return {c.clip_id for c in loaded.clips}
+
+    everything = ids([])
+    assert {"run_a", "run_a@1", "mirror/run_a", "mirror/run_a@1", "walk_a", "walk_a@1"} <= everything
+    assert ids(["run_a"]) == everything - {"run_a", "run_a@1", "mirror/run_a", "mirror/run_a@1"}
+    assert ids(["mirror/run_a", "walk_a"]) == everything - {"mirror/run_a", "mirror/run_a@1", "walk_a", "walk_a@1"}
+    with pytest.raises(InputError, match=r"\(train split\): exclude_clips names 'walk_c', which is not a clip there"):
+        ids(["walk_c"])  # a val clip
+
+    out, config = tmp_path / "run", tmp_path / "bad.json"
+    train = ["train", "planner", "--data", str(data), "--tokenizer", str(runs / "tok"), "--kind", "ar",
+             "--out", str(out), "--steps", "2", "--config", str(config)]
+    for bad, message in ((["run_b"], "(train split): exclude_clips names 'run_b', which is not a clip there"),
+                         (["run_a", "run_a"], "exclude_clips lists 'run_a' more than once"),
+                         ("run_a", "exclude_clips must be a list of clip ids")):
+        config.write_text(json.dumps({**TINY_PLANNER, "train": {**TINY_PLANNER["train"], "exclude_clips": bad}}))
+        assert main(train) == 2
+        assert message in capsys.readouterr().err
+        assert not out.exists()
 
 
 def test_balance_groups_draws_rare_labels_more_often():

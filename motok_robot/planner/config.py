@@ -175,6 +175,11 @@ class PlannerTrainConfig:
     #: relative weights in the rest.  Empty = off.  As the tokenizer's ``action_share``
     #: (:func:`motok_robot.data.groups.with_action_shares`).
     action_share: dict[str, float] = field(default_factory=dict)
+    #: ids of train-split clips to leave out of training (a data choice, e.g. clips whose motion
+    #: the tokenizer cannot reproduce, so that their token sequences teach the planner something
+    #: other than their captions say).  A clip's mirrored copy (``mirror_of`` in index.jsonl)
+    #: and its token-phase copies go with it.  An id not in the train split is an error.
+    exclude_clips: list[str] = field(default_factory=list)
     #: planners with ``end_embedding``: this fraction of the training samples gets the "end
     #: unknown" entry although its crop ends with the clip, so the AR planner also learns to
     #: close a motion with [END] when no length is given (``plan(n_tokens=None)``).  None = the
@@ -206,6 +211,13 @@ class PlannerTrainConfig:
             raise InputError("train config: masked_loss_average is for the masked planner")
         check_balance(self.balance_groups, "train config")
         self.action_share = check_action_shares(self.action_share, "train config")
+        if not isinstance(self.exclude_clips, (list, tuple)) or not all(
+                isinstance(c, str) and c.strip() for c in self.exclude_clips):
+            raise InputError(f"train config: exclude_clips must be a list of clip ids (got {self.exclude_clips!r})")
+        self.exclude_clips = [c.strip() for c in self.exclude_clips]
+        repeated = sorted({c for c in self.exclude_clips if self.exclude_clips.count(c) > 1})
+        if repeated:
+            raise InputError(f"train config: exclude_clips lists {repeated[0]!r} more than once")
         if self.end_unknown_prob is None:
             self.end_unknown_prob = AR_END_UNKNOWN_PROB if kind == "ar" else 0.0
         if not 0.0 <= self.end_unknown_prob <= 1.0:

@@ -234,15 +234,17 @@ class PlannerData:
 
 def load_planner_data(
     data_dir: str | Path, split: str, tokenizer, tokenizer_key: str, encoder, cache_dir: Path,
-    action_labels: list[str], max_tokens: int, phases: int = 1,
+    action_labels: list[str], max_tokens: int, phases: int = 1, exclude: list[str] | tuple = (),
 ) -> PlannerData:
     """Tokenise (cached), embed texts (cached) and assemble :class:`PlannerData` for ``split``.
 
     ``phases`` > 1 also tokenises every clip from frames ``1 .. phases - 1`` on (at most
     ``downsample - 1``): the same motion seen through shifted token grids, each one more
-    training sequence (a clip id gets the suffix ``@<offset>``).
+    training sequence (a clip id gets the suffix ``@<offset>``).  ``exclude``: clip ids of the
+    split left out, with their mirrored copies (see :func:`excluded_clips`).
     """
     dataset = open_dataset(data_dir, split)
+    left_out = excluded_clips(dataset, exclude, f"{data_dir} ({split} split)")
     index = Path(data_dir) / "index.jsonl"
     stat = index.stat()
     key = f"{tokenizer_key}|{Path(data_dir).resolve()}|{split}|{stat.st_size}|{stat.st_mtime_ns}"
@@ -254,7 +256,7 @@ def load_planner_data(
         token_maps[offset] = tokenise_split(dataset, tokenizer, cache_dir / f"tokens_{split}_offset{offset}.npz",
                                             f"{key}|offset {offset}", offset=offset)
     texts_per_clip: dict[str, list[str]] = {}
-    for clip_id in token_maps[0]:
+    for clip_id in [c for c in token_maps[0] if c not in left_out]:
         texts_per_clip[clip_id] = [t for t in (normalise_text(x) for x in dataset.texts(clip_id)) if t][:32]
     unique = sorted({t for ts in texts_per_clip.values() for t in ts})
     table = embed_texts(unique, encoder, cache_dir)
@@ -262,6 +264,8 @@ def load_planner_data(
     label_index = {label: i for i, label in enumerate(action_labels)}
     clips = []
     for clip_id, tokens in tqdm(token_maps[0].items(), desc=f"loading {split}", unit="clip", disable=None):
+        if clip_id in left_out:
+            continue
         feats = np.asarray(dataset.features(clip_id), dtype=np.float16)
         label = label_index.get(clip_action(dataset.record(clip_id)), -1)
         rows = [row_of[t] for t in texts_per_clip[clip_id]]
@@ -272,6 +276,21 @@ def load_planner_data(
                 clips.append(TokenisedClip(f"{clip_id}@{offset}", shifted,
                                            feats[offset: offset + len(shifted) * ds], rows, label))
     return PlannerData(clips, table, ds, max_tokens)
+
+
+def excluded_clips(dataset, exclude: list[str] | tuple, where: str) -> set[str]:
+    """The clip ids of ``dataset`` that ``exclude`` leaves out: every listed id and every clip
+    whose ``mirror_of`` is one of them.  A listed id that is not in the dataset is an error (a
+    typo would otherwise train on the clip it meant to drop)."""
+    if not exclude:
+        return set()
+    present = set(dataset.clip_ids)
+    missing = [c for c in exclude if c not in present]
+    if missing:
+        raise InputError(f"{where}: exclude_clips names {missing[0]!r}, which is not a clip there"
+                         + (f" ({len(missing) - 1} more missing)" if len(missing) > 1 else ""))
+    named = set(exclude)
+    return named | {c for c in dataset.clip_ids if dataset.record(c).get("mirror_of") in named}
 
 
 def action_labels_of(data_dir: str | Path, split: str = "train") -> list[str]:

@@ -30,7 +30,7 @@ from motok_robot.planner.checkpoint import (
 from motok_robot.planner.config import (
     PlannerConfig, PlannerTrainConfig, planner_config_from_dict, saved_planner_config, to_dict, train_config_from_dict,
 )
-from motok_robot.planner.data import PlannerData, action_labels_of, load_planner_data
+from motok_robot.planner.data import PlannerData, action_labels_of, excluded_clips, load_planner_data, open_dataset
 
 CHECKPOINT_FILE = "checkpoint.safetensors"
 STATE_FILE = "train_state.json"
@@ -190,6 +190,10 @@ def train_planner(
     if unknown:  # before the run folder is written and the clips are tokenised
         raise InputError(f"train config: action_share names {unknown[0]!r}, which no clip of {data_dir} has "
                          f"(labels there: {', '.join(sorted(config.action_labels)) or 'none'})")
+    if train_cfg.exclude_clips:  # also before the run folder is written: a wrong id is an error naming it
+        left_out = excluded_clips(open_dataset(data_dir, "train"), train_cfg.exclude_clips, f"{data_dir} (train split)")
+        print(f"left out of training: {len(left_out)} clips ({len(train_cfg.exclude_clips)} named in exclude_clips, "
+              "with their mirrors)")
     extra = {"train": to_dict(train_cfg),
              "tokenizer": record,
              "text_encoder": encoder.name, "data": str(Path(data_dir).resolve())}
@@ -201,7 +205,8 @@ def train_planner(
 
     cache = out / "cache"
     train_data = load_planner_data(data_dir, "train", tokenizer, tokenizer_key, encoder, cache,
-                                   config.action_labels, config.max_tokens, phases=train_cfg.token_phases)
+                                   config.action_labels, config.max_tokens, phases=train_cfg.token_phases,
+                                   exclude=train_cfg.exclude_clips)
     try:
         val_data = load_planner_data(data_dir, "val", tokenizer, tokenizer_key, encoder, cache,
                                      config.action_labels, config.max_tokens)
