@@ -25,12 +25,9 @@ TH = B.BehaviourThresholds()
 #: and if the shipped one starts passing the test fails so the entry gets removed). The pass rates
 #: over seeds 0-95 are in benchmarks/results/planner_behaviour*.json (python
 #: benchmarks/planner_behaviour.py) and the model card: seed 0 passing says little about a sampler.
-KNOWN_MISSES = {
-    "5c9e80ceefcbd3ac": {"bow": "with seed 0 the shipped AR planner bows only 22.6 degrees (the check asks for 30) "
-                                "and straightens up again; decoded from the noise of seeds 1-5 instead, the same "
-                                "tokens bow 24-39 degrees (noises 1 and 4 pass); it bows and comes back up in 54 "
-                                "of seeds 0-95"},
-}
+#: None at present: the AR planner shipped before 2026-11-28 (``5c9e80ceefcbd3ac``) bowed only
+#: 22.6 degrees with seed 0, and the one shipped since passes.
+KNOWN_MISSES: dict[str, dict[str, str]] = {}
 
 
 def _expect_known_miss(request, kind: str, behaviour: str) -> None:

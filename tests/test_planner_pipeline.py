@@ -664,13 +664,15 @@ def test_init_from_can_switch_on_the_end_embedding(runs, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("recipe_file, kind", [("planner_ar_train.json", "ar"),
+                                               ("planner_ar_finetune.json", "ar"),
                                                ("planner_masked_finetune.json", "masked")])
 def test_training_recipe_parses_and_matches_the_shipped_planner(recipe_file, kind):
-    """The recipes models/train_default_models.sh passes with --config (the AR planner's, and the
-    masked planner's balanced fine-tune, run with --init-from) parse into valid configs, and every
-    field they set is what the shipped planner's config.json records it was trained with (checked
-    only when that planner is there). A fine-tune recipe's 'planner' section only switches on what
-    a fine-tune may add, and the shipped masked planner records the run it was fine-tuned from."""
+    """The recipes models/train_default_models.sh passes with --config (the AR planner's base run,
+    and both planners' fine-tunes, run with --init-from) parse into valid configs, and what they
+    set is what the shipped planner's config.json records (checked only when that planner is
+    there): every field of a fine-tune recipe, and the architecture of a base recipe whose run the
+    shipped planner was fine-tuned from. A fine-tune recipe's 'planner' section only switches on
+    what a fine-tune may add, and the shipped planner records the run it was fine-tuned from."""
     from pathlib import Path
 
     from motok_robot.planner.config import PlannerConfig, planner_config_from_dict, to_dict, train_config_from_dict
@@ -681,7 +683,7 @@ def test_training_recipe_parses_and_matches_the_shipped_planner(recipe_file, kin
     assert set(recipe) <= {"planner", "train"}
     planner_config_from_dict({**to_dict(PlannerConfig(kind=kind)), **recipe.get("planner", {})})
     train_config_from_dict(recipe.get("train", {})).validate(kind)
-    fine_tune = kind == "masked"
+    fine_tune = recipe_file.endswith("_finetune.json")
     if fine_tune:
         assert set(recipe.get("planner", {})) <= set(SWITCHES_ON_INIT), "--init-from takes the architecture from its run"
     shipped = models / f"planner_{kind}" / "config.json"
@@ -689,11 +691,13 @@ def test_training_recipe_parses_and_matches_the_shipped_planner(recipe_file, kin
         pytest.skip(f"no shipped {kind} planner in {shipped.parent}")
     saved = json.loads(shipped.read_text())
     assert saved["planner"]["kind"] == kind
-    for section, values in recipe.items():
+    sections = recipe if fine_tune or "init_from" not in saved else {"planner": recipe.get("planner", {})}
+    for section, values in sections.items():
         for key, value in values.items():
             assert saved[section][key] == value, f"{shipped}: {section}.{key} is {saved[section][key]!r}, recipe {value!r}"
     if fine_tune:
         assert len(saved["init_from"]["sha256"]) == 16
+
 
 def test_ar_end_embedding_trains_with_some_ends_unknown(runs, tmp_path):
     """An AR planner with ``end_embedding`` trains through the command path; its run records the
