@@ -47,6 +47,14 @@ fi
 resume_flag() { if [ -f "$1/config.json" ]; then echo --resume; fi; }
 
 DEV=(--device "${DEVICE:-cpu}")
+# fine-tune $WORK/planner_KIND into $WORK/planner_KIND_finetune with models/planner_KIND_finetune.json
+# (or resume that fine-tune)
+finetune_planner() {
+  local from=(--init-from "$WORK/planner_$1" --config "models/planner_$1_finetune.json")
+  if [ -f "$WORK/planner_$1_finetune/config.json" ]; then from=(--resume); fi
+  motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind "$1" \
+    --out "$WORK/planner_$1_finetune" "${from[@]}" "${DEV[@]}"
+}
 motok-robot train tokenizer --data "$PREPARED" --out "$WORK/tokenizer" "${DEV[@]}" $(resume_flag "$WORK/tokenizer")
 # Optional second tokenizer stage (TOKENIZER_STAGE2=1; not part of the shipped models, see the
 # model card): the decoder side trained further, encoder + codebook frozen, so the tokens and the
@@ -78,24 +86,17 @@ fi
 # planner's fine-tune with a bow share" and "The AR planner fine-tuned on curated bows".
 motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind masked \
   --out "$WORK/planner_masked" "${DEV[@]}" $(resume_flag "$WORK/planner_masked")
-FINETUNE=(--init-from "$WORK/planner_masked" --config models/planner_masked_finetune.json)
-if [ -f "$WORK/planner_masked_finetune/config.json" ]; then FINETUNE=(--resume); fi
-motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind masked \
-  --out "$WORK/planner_masked_finetune" "${FINETUNE[@]}" "${DEV[@]}"
+finetune_planner masked
 motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind ar \
   --config models/planner_ar_train.json --out "$WORK/planner_ar" "${DEV[@]}" $(resume_flag "$WORK/planner_ar")
-FINETUNE=(--init-from "$WORK/planner_ar" --config models/planner_ar_finetune.json)
-if [ -f "$WORK/planner_ar_finetune/config.json" ]; then FINETUNE=(--resume); fi
-motok-robot train planner --data "$PREPARED" --tokenizer "$WORK/tokenizer" --kind ar \
-  --out "$WORK/planner_ar_finetune" "${FINETUNE[@]}" "${DEV[@]}"
+finetune_planner ar
 motok-robot train evaluator --data "$PREPARED" --out "$WORK/evaluator" "${DEV[@]}" $(resume_flag "$WORK/evaluator")
 
 # ship: weights, configs and training curves only (no optimiser state, no caches)
 for name in tokenizer planner_masked planner_ar evaluator; do
   run=$name
   if [ "$name" = tokenizer ]; then run=$TOKENIZER_RUN; fi
-  if [ "$name" = planner_masked ]; then run=planner_masked_finetune; fi
-  if [ "$name" = planner_ar ]; then run=planner_ar_finetune; fi
+  case $name in planner_*) run=${name}_finetune ;; esac   # both planners ship their fine-tunes
   mkdir -p "models/$name"
   for f in config.json model.safetensors metrics.csv training.json; do
     if [ -f "$WORK/$run/$f" ]; then cp "$WORK/$run/$f" "models/$name/$f"; fi
