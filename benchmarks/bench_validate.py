@@ -35,7 +35,7 @@ from motok_robot.robots import list_robots, load  # noqa: E402
 from motok_robot.sim import synthetic  # noqa: E402
 from motok_robot.sim.config import ValidationConfig  # noqa: E402
 from motok_robot.sim.kinematic import replay  # noqa: E402
-from motok_robot.sim.model_index import index_robot  # noqa: E402
+from motok_robot.robots.index import index_robot  # noqa: E402
 from motok_robot.sim.rollout import simulate  # noqa: E402
 from motok_robot.sim.trajectory import RobotTrajectory  # noqa: E402
 from motok_robot.sim.validate import validate_trajectory  # noqa: E402

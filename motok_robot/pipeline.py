@@ -467,10 +467,10 @@ _ROBOT_STAGES: dict[tuple[str, str], dict] = {}
 def load_robot_stages(name: str, retarget_config=None) -> dict:
     """``{"robot", "retargeter", "index"}`` for robot ``name``: the :class:`~motok_robot.robots.Robot`,
     its :class:`~retarget.solve.Retargeter` (compiled window problems are kept in it) and its
-    validation :class:`~motok_robot.sim.model_index.RobotIndex`; reused per process for the same
+    validation :class:`~motok_robot.robots.index.RobotIndex`; reused per process for the same
     robot file and retargeting settings."""
     from motok_robot.robots import load
-    from motok_robot.sim.model_index import index_robot
+    from motok_robot.robots.index import index_robot
     from retarget.config import RetargetConfig
     from retarget.robot_model import RetargetRobot
     from retarget.solve import Retargeter

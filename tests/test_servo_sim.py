@@ -19,7 +19,7 @@ def robot():
 
 @pytest.fixture(scope="module")
 def index(robot):
-    from motok_robot.sim.model_index import index_robot
+    from motok_robot.robots.index import index_robot
 
     return index_robot(robot)
 

@@ -18,7 +18,7 @@ from motok_robot.sim.config import ValidationConfig
 from motok_robot.sim.dynamics import finite_difference, moving_average, zmp_from_centroidal
 from motok_robot.sim.geometry import convex_hull, signed_distance
 from motok_robot.sim.kinematic import replay
-from motok_robot.sim.model_index import body_pairs_in_collision, index_robot
+from motok_robot.robots.index import body_pairs_in_collision, index_robot
 from motok_robot.sim.report import METRIC_KEYS, frame_ranges, validate_report_dict
 from motok_robot.sim.testing import JOINTS, tiny_humanoid
 from motok_robot.sim.trajectory import RobotTrajectory, load_robot_npz, save_robot_npz

@@ -14,7 +14,7 @@ from motok_robot.cli import main
 from motok_robot.robots import list_robots, load
 from motok_robot.sim import synthetic as S
 from motok_robot.sim.config import ValidationConfig
-from motok_robot.sim.model_index import index_robot
+from motok_robot.robots.index import index_robot
 from motok_robot.sim.testing import tiny_humanoid
 from motok_robot.sim.trajectory import RobotTrajectory, save_robot_npz
 from motok_robot.sim.validate import validate_trajectory

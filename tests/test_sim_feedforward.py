@@ -12,7 +12,7 @@ from motok_robot.errors import InputError
 from motok_robot.sim import synthetic as S
 from motok_robot.sim.config import ValidationConfig
 from motok_robot.sim.feedforward import GOALS_FILE, feedforward_goals, goals_digest, load_servo_goals, servo_gains
-from motok_robot.sim.model_index import index_robot
+from motok_robot.robots.index import index_robot
 from motok_robot.sim.rollout import servo_model, simulate
 from motok_robot.sim.testing import tiny_humanoid
 from motok_robot.sim.trajectory import RobotTrajectory

@@ -62,7 +62,7 @@ def _robot_for(path, robot_arg, cache):
 
     from motok_robot.errors import InputError
     from motok_robot.robots import load
-    from motok_robot.sim.model_index import index_robot
+    from motok_robot.robots.index import index_robot
 
     name = robot_arg
     if not name:

@@ -6,7 +6,7 @@
 * feet: lowest sole-corner height, contact (height < ``contact_height_m``), sole-centre
   horizontal speed, skating (speed > ``skate_speed_mps`` while in contact);
 * ground: penetration of the lowest sole corner, floating of the robot's lowest sole point;
-* self-collision between non-adjacent bodies (``model_index.body_pairs_in_collision``);
+* self-collision between non-adjacent bodies (``motok_robot.robots.index.body_pairs_in_collision``);
 * joints: position, velocity, acceleration (finite differences) against limits;
 * required joint torques from inverse dynamics with the ground reaction distributed over
   the sole corners in contact (:mod:`motok_robot.sim.dynamics`);
@@ -28,7 +28,7 @@ from motok_robot.sim.config import ValidationConfig
 from motok_robot.sim.dynamics import (ContactDistributor, finite_difference, moving_average, qvel_qacc,
                                       zmp_from_centroidal)
 from motok_robot.sim.geometry import convex_hull, signed_distance
-from motok_robot.sim.model_index import RobotIndex, body_pairs_in_collision
+from motok_robot.robots.index import RobotIndex, body_pairs_in_collision
 
 
 @dataclass

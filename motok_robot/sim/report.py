@@ -67,7 +67,7 @@ import numpy as np
 
 from motok_robot.sim.config import ValidationConfig
 from motok_robot.sim.kinematic import KinematicResult
-from motok_robot.sim.model_index import SIDES, RobotIndex
+from motok_robot.robots.index import SIDES, RobotIndex
 from motok_robot.sim.rollout import RolloutResult
 
 SCHEMA = "motok-robot/validation-report/1"

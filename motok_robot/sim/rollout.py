@@ -41,7 +41,7 @@ from mujoco import rollout as mj_rollout
 from motok_robot.sim.config import ValidationConfig
 from motok_robot.sim.dynamics import finite_difference_qvel
 from motok_robot.sim.geometry import convex_hull, signed_distance
-from motok_robot.sim.model_index import RobotIndex
+from motok_robot.robots.index import RobotIndex
 
 
 @dataclass

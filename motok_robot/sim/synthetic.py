@@ -1,6 +1,6 @@
 """Synthetic trajectories of any robot: clean motions and the faults each check must catch.
 
-All generators take a :class:`~motok_robot.sim.model_index.RobotIndex` and return
+All generators take a :class:`~motok_robot.robots.index.RobotIndex` and return
 ``qpos`` float64 [T, nq] at ``fps`` frames per second, built from the robot's nominal pose.
 Feet are placed by damped least-squares inverse kinematics on the leg joints (the joints
 that move a sole), with the free base prescribed, so the soles are where they are meant
@@ -20,7 +20,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from motok_robot.sim.model_index import RobotIndex
+from motok_robot.robots.index import RobotIndex
 
 
 class LegIK:

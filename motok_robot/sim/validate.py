@@ -18,7 +18,7 @@ from motok_robot import __version__
 from motok_robot.sim.config import ValidationConfig
 from motok_robot.sim.feedforward import GOALS_FILE, feedforward_goals, goals_digest, save_servo_goals, servo_gains
 from motok_robot.sim.kinematic import KinematicResult, replay
-from motok_robot.sim.model_index import RobotIndex, index_robot
+from motok_robot.robots.index import RobotIndex, index_robot
 from motok_robot.sim.report import SCHEMA, build_checks, summary_text, write_report
 from motok_robot.sim.rollout import RolloutResult, servo_model, simulate
 from motok_robot.sim.trajectory import RobotTrajectory, check_matches_robot, load_robot_npz

@@ -51,6 +51,7 @@ class RobotIndex:
     nominal_qpos: np.ndarray    # float [nq]
     height_m: float             # standing height at the nominal pose (top of the highest geom)
     total_mass: float
+    mjcf_path: object = None    # Path of the MJCF the model was compiled from (None: built in memory)
     ignored_body_pairs: set = field(default_factory=set)  # self-collision pairs touching at nominal
 
     @property
@@ -118,7 +119,8 @@ def index_robot(robot) -> RobotIndex:
         root_body=root_body, base_dof=base_dof, sole_site=np.array(sole_site),
         corner_sites=np.array(corners), sole_body=np.array(sole_body),
         actuator_joint=actuator_joint, actuator_is_position=actuator_is_position,
-        nominal_qpos=nominal, height_m=height, total_mass=float(kin_model.body_subtreemass[root_body]))
+        nominal_qpos=nominal, height_m=height, total_mass=float(kin_model.body_subtreemass[root_body]),
+        mjcf_path=getattr(robot, "mjcf_path", None))
     index.ignored_body_pairs = collision.touching_body_pairs(collision_model, nominal)
     return index
 
