@@ -29,7 +29,8 @@ def write_clip(folder, robot, seconds=0.4, passed=True, report=True):
     np.savez(path, qpos=qpos, joint_names=np.array(robot.joint_names), robot=robot.name, fps=20.0)
     if report:
         (folder / "report.json").write_text(json.dumps({"passed": passed, "robot": robot.name,
-                                                        "input": {"path": str(path)}}))
+                                                        "input": {"path": str(path)},
+                                                        "robot_description": {"sha256": robot.description_sha256}}))
     return path
 
 

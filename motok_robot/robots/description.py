@@ -9,8 +9,12 @@ Two levels of checking:
 * :func:`parse_description` checks the file on its own (fields present and of the right type,
   canonical joint names, servo IDs unique, ticks inside ``0..ticks_per_rev-1``);
 * :func:`check_against_model` checks it against the compiled MJCF (sites, bodies and joints exist,
-  each actuated joint has exactly one servo, the servo tick limits cover the joint range, the
-  nominal pose lies in the joint ranges).
+  each actuated joint has exactly one servo, the servo tick limits cover the joint range and lie
+  inside it (to within :data:`TICK_TOLERANCE`), the nominal pose lies in the joint ranges).
+
+Velocity limits must lie inside the servo model's datasheet range
+(:mod:`motok_robot.robots.servo_models`; joints without a servo: positive, finite, at most
+50 rad/s); the robot's torque limits are checked against the stall torque in :class:`Robot`.
 
 Every error is an :class:`~motok_robot.errors.InputError` whose message names the file and the
 entry (``op3_like.toml: [servos.l_knee] ...``).  No torch, no mujoco import at module level.
@@ -26,6 +30,7 @@ from typing import Any
 
 from motok_robot.errors import InputError
 from motok_robot.motion.skeleton import JOINT_NAMES
+from motok_robot.robots import servo_models
 
 SIDES = ("left", "right")
 LIMBS = ("legs", "arms", "torso", "head")
@@ -244,8 +249,9 @@ def parse_description(path: str | Path) -> RobotDescription:
     velocity_limits = {}
     for joint, value in r.table(data, "velocity_limits", "", required=False).items():
         value = r.get({joint: value}, joint, float, "velocity_limits")
-        if not value > 0:
-            raise r.fail(f"velocity_limits.{joint}", f"must be > 0 rad/s, got {value}")
+        problem = servo_models.generic_velocity_problem(value)
+        if problem:
+            raise r.fail(f"velocity_limits.{joint}", problem)
         velocity_limits[joint] = value
 
     bus = None
@@ -299,8 +305,12 @@ def parse_description(path: str | Path) -> RobotDescription:
                 raise r.fail(where, f"{key} {v} outside the servo's 0..{top} ticks")
         if spec.min_ticks >= spec.max_ticks:
             raise r.fail(where, f"min_ticks {spec.min_ticks} must be below max_ticks {spec.max_ticks}")
-        if not spec.velocity_limit > 0:
-            raise r.fail(where, f"velocity_limit must be > 0 rad/s, got {spec.velocity_limit}")
+        if spec.model.upper() not in servo_models.DATASHEETS:
+            raise r.fail(where, f"servo model {spec.model!r} has no datasheet entry (known: "
+                                f"{', '.join(servo_models.DATASHEETS)}); its limits cannot be checked")
+        problem = servo_models.velocity_problem(spec.model, spec.velocity_limit)
+        if problem:
+            raise r.fail(where, problem)
         servos.append(spec)
     if servos and bus is None:
         raise r.fail("", "servos are listed but there is no [bus] table")
@@ -328,6 +338,9 @@ def parse_description(path: str | Path) -> RobotDescription:
 
 #: how far (in ticks) the servo limits may fall inside the joint range (tick rounding)
 TICK_TOLERANCE = 0.5
+#: how far (in ticks) the servo limits may reach beyond the joint range: the range rounded
+#: outward to whole ticks (at most 1 tick, 0.0015 rad for 4096 ticks per turn), never more
+TICK_OUTSIDE_TOLERANCE = 1.0
 
 
 def check_against_model(desc: RobotDescription, model, joint_names: list[str], joint_range) -> None:
@@ -384,6 +397,14 @@ def check_against_model(desc: RobotDescription, model, joint_names: list[str], j
                     where,
                     f"servo ticks {spec.min_ticks}..{spec.max_ticks} allow [{slo:.4f}, {shi:.4f}] rad, "
                     f"which does not cover the joint range [{lo:.4f}, {hi:.4f}] rad",
+                )
+            out = TICK_OUTSIDE_TOLERANCE * spec.rad_per_tick
+            if slo < lo - out or shi > hi + out:
+                raise r.fail(
+                    where,
+                    f"servo ticks {spec.min_ticks}..{spec.max_ticks} allow [{slo:.4f}, {shi:.4f}] rad, "
+                    f"wider than the joint range [{lo:.4f}, {hi:.4f}] rad of {desc.mjcf.name} by more than "
+                    f"{TICK_OUTSIDE_TOLERANCE:g} tick: servo limits must lie inside the joint range",
                 )
         missing = [j for j in joint_names if desc.servo_for(j) is None]
         if missing:

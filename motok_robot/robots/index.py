@@ -52,6 +52,7 @@ class RobotIndex:
     height_m: float             # standing height at the nominal pose (top of the highest geom)
     total_mass: float
     mjcf_path: object = None    # Path of the MJCF the model was compiled from (None: built in memory)
+    description_sha256: str | None = None  # digest of the description (TOML + MJCF bytes), Robot.description_sha256
     ignored_body_pairs: set = field(default_factory=set)  # self-collision pairs touching at nominal
 
     @property
@@ -120,7 +121,8 @@ def index_robot(robot) -> RobotIndex:
         corner_sites=np.array(corners), sole_body=np.array(sole_body),
         actuator_joint=actuator_joint, actuator_is_position=actuator_is_position,
         nominal_qpos=nominal, height_m=height, total_mass=float(kin_model.body_subtreemass[root_body]),
-        mjcf_path=getattr(robot, "mjcf_path", None))
+        mjcf_path=getattr(robot, "mjcf_path", None),
+        description_sha256=getattr(robot, "description_sha256", None))
     index.ignored_body_pairs = collision.touching_body_pairs(collision_model, nominal)
     return index
 

@@ -9,6 +9,7 @@ position xyz in m and quaternion wxyz first).
 
 from __future__ import annotations
 
+import hashlib
 import os
 import warnings
 from pathlib import Path
@@ -17,6 +18,7 @@ import numpy as np
 
 from motok_robot.paths import MODELS_ENV, robots_dir  # noqa: F401 (MODELS_ENV re-exported)
 from motok_robot.errors import InputError
+from motok_robot.robots import servo_models
 from motok_robot.robots.description import (
     BusSpec,
     Keypoint,
@@ -130,6 +132,12 @@ class Robot:
             if not limits:
                 raise InputError(f"{self.mjcf_path.name}: the actuator of joint {self.joint_names[i]!r} has no torque limit")
             self.torque_limit[i] = float(min(limits))
+            servo = description.servo_for(self.joint_names[i])
+            problem = (servo_models.torque_problem(servo.model, self.torque_limit[i]) if servo is not None
+                       else None if np.isfinite(self.torque_limit[i]) and self.torque_limit[i] > 0
+                       else f"torque limit must be a positive finite number of N m, got {self.torque_limit[i]}")
+            if problem:
+                raise InputError(f"{self.mjcf_path.name}: actuator of joint {self.joint_names[i]!r}: {problem}")
 
         self.velocity_limit = np.zeros(len(self.joint_names))
         for i, n in enumerate(self.joint_names):
@@ -140,6 +148,14 @@ class Robot:
                 self.velocity_limit[i] = description.velocity_limits.get(n, description.velocity_limits.get("default"))
 
     # -- description shortcuts ---------------------------------------------------------------
+    @property
+    def description_sha256(self) -> str:
+        """Digest of this robot's description: sha256 over the TOML and the MJCF bytes
+        (:func:`description_digest`); a validation report records it and playback checks it."""
+        if getattr(self, "_description_sha256", None) is None:
+            self._description_sha256 = description_digest(self.description.path, self.mjcf_path)
+        return self._description_sha256
+
     @property
     def keypoints(self) -> list[Keypoint]:
         return self.description.keypoints
@@ -247,6 +263,33 @@ class Robot:
 
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, nj={self.nj}, mass={self.total_mass():.2f} kg, servos={len(self.servos)})"
+
+
+def description_digest(toml_path: str | os.PathLike, mjcf_path: str | os.PathLike) -> str:
+    """sha256 over the bytes of a robot description: ``len(toml) toml len(mjcf) mjcf`` (lengths
+    as 8-byte big-endian integers, so no two pairs of files give the same stream)."""
+    digest = hashlib.sha256()
+    for path in (toml_path, mjcf_path):
+        data = Path(path).read_bytes()
+        digest.update(len(data).to_bytes(8, "big"))
+        digest.update(data)
+    return digest.hexdigest()
+
+
+def installed_robot_name(value: str, where: str) -> str:
+    """``value`` (a robot named inside a data file, e.g. the ``robot`` field of robot.npz) when it
+    names an installed robot (:func:`list_robots`); otherwise InputError naming ``where``.
+
+    A data file may only NAME a robot: a path to a description in a data file would let the file
+    choose its own limits. A description path is accepted only from the user (``--robot PATH``)."""
+    text = str(value).strip()
+    installed = list_robots()
+    if text in installed:
+        return text
+    looks_like_path = any(c in text for c in "/\\") or text.endswith((".toml", ".xml"))
+    why = "is a path, and a data file may only name an installed robot" if looks_like_path else "is not an installed robot"
+    raise InputError(f"{where}: field 'robot' {text!r} {why} (installed: {', '.join(installed) or 'none'}, "
+                     f"in {models_dir()}); pass --robot NAME or --robot PATH/TO/NAME.toml to choose one")
 
 
 def load(name_or_path: str | os.PathLike) -> Robot:

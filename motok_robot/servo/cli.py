@@ -13,7 +13,8 @@ def register(commands, groups) -> None:
         description="Stream robot.npz to the servos at a fixed rate: report gate, pre-flight, ramp to frame 0, "
                     "clamped streaming, safe stop. Exits non-zero with one line naming the servo on a fault.")
     play.add_argument("trajectory", help="robot.npz (retargeting output)")
-    play.add_argument("--robot", help="robot name or NAME.toml (default: the robot named in robot.npz)")
+    play.add_argument("--robot", help="robot name or PATH/NAME.toml (default: the installed robot that the 'robot' "
+                                      "field of robot.npz names; a path there is refused)")
     play.add_argument("--port", help="serial device, e.g. /dev/ttyUSB0 (not needed with --dry-run / --sim)")
     play.add_argument("--baud", type=int, help="baud rate (default: the robot's bus, 2000000 for op3_like)")
     play.add_argument("--rate", type=float, help="control rate in Hz (default: the robot's bus, 125)")
@@ -59,13 +60,16 @@ def _show_warning_line(message, category, filename, lineno, file=None, line=None
 
 
 def _robot_name_from_npz(path: Path) -> str | None:
+    """The ``robot`` field of ``path`` (None when absent); InputError for an unreadable file."""
     import numpy as np
 
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            return str(data["robot"]) if "robot" in data.files else None
-    except Exception:
+    from motok_robot.npz_files import read_npz_fields
+
+    fields = read_npz_fields(path, "trajectory file")
+    if "robot" not in fields:
         return None
+    value = np.asarray(fields["robot"])
+    return str(value.reshape(()).item()) if value.size == 1 else repr(value.tolist())[:80]
 
 
 def _play(args: argparse.Namespace) -> int:
@@ -84,6 +88,7 @@ def _play_inner(args: argparse.Namespace) -> int:
         os.environ.setdefault("MUJOCO_GL", "egl")
     from motok_robot.errors import InputError
     from motok_robot.robots import load
+    from motok_robot.robots.robot import installed_robot_name
     from motok_robot.servo.bus import DynamixelBus
     from motok_robot.servo.config import ON_STOP_HOLD, ON_STOP_TORQUE_OFF, PlaybackConfig
     from motok_robot.servo.convert import ServoMap
@@ -93,17 +98,22 @@ def _play_inner(args: argparse.Namespace) -> int:
     path = Path(args.trajectory)
     if not path.is_file():
         raise InputError(f"{path}: no such trajectory file")
-    robot_name = args.robot or _robot_name_from_npz(path)
-    if not robot_name:
-        raise InputError(f"{path}: no 'robot' field; pass --robot NAME")
+    if args.robot:  # the user's choice: an installed name or a description path
+        robot_name = args.robot
+    else:  # a data file may only NAME an installed robot, never point at a description
+        saved = _robot_name_from_npz(path)
+        if not saved:
+            raise InputError(f"{path}: no 'robot' field; pass --robot NAME")
+        robot_name = installed_robot_name(saved, str(path))
     if not (args.dry_run or args.sim) and not args.port:
         raise InputError("--port DEV is required (or --dry-run / --sim to play without hardware)")
     if args.render and not args.sim:
         raise InputError("--render needs --sim")
     robot = load(robot_name)
-    check_validation_report(path, args.report, force=args.force, robot_name=robot.name)
+    digest = robot.description_sha256
+    check_validation_report(path, args.report, force=args.force, robot_name=robot.name, robot_sha256=digest)
     servo_map = ServoMap.from_specs(robot.servos)
-    trajectory = load_trajectory(path, servo_map, robot.name, args.report)
+    trajectory = load_trajectory(path, servo_map, robot.name, args.report, robot_sha256=digest)
     print("streaming the validated feedforward servo goals (servo_goals.npz)" if trajectory.goals == "feedforward"
           else "streaming the joint angles of the trajectory (no validated servo goals for this file)")
     bus_spec = robot.bus

@@ -49,8 +49,9 @@ class PlaybackConfig:
 
         if not 1.0 <= self.rate_hz <= 1000.0:
             raise InputError(f"playback rate {self.rate_hz} Hz outside 1..1000 Hz")
-        if self.ramp_s < 0:
-            raise InputError(f"ramp time must be >= 0 s, got {self.ramp_s}")
+        from motok_robot.limits import check_seconds
+
+        check_seconds(self.ramp_s, "playback", "the ramp time (--ramp)")
         if not 0.0 < self.velocity_margin <= 1.0:
             raise InputError(f"velocity_margin must lie in (0, 1], got {self.velocity_margin}")
         if self.retry_budget < 0 or self.read_every < 1:

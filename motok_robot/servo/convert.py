@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from motok_robot.errors import InputError
+from motok_robot.robots import servo_models
 
 
 @dataclass(frozen=True)
@@ -69,6 +70,12 @@ class ServoMap:
                 raise InputError(f"{label}: tick range [{spec.min_ticks}, {spec.max_ticks}] outside 0..{int(spec.ticks_per_rev) - 1}")
             if not (math.isfinite(float(spec.velocity_limit)) and float(spec.velocity_limit) > 0):
                 raise InputError(f"{label}: velocity_limit must be a positive number of rad/s, got {spec.velocity_limit}")
+            if str(spec.model).upper() not in servo_models.DATASHEETS:
+                raise InputError(f"{label}: servo model {spec.model!r} has no datasheet entry (known: "
+                                 f"{', '.join(servo_models.DATASHEETS)})")
+            problem = servo_models.velocity_problem(spec.model, float(spec.velocity_limit))
+            if problem:  # the limiter's per-tick step follows this value: never above the datasheet
+                raise InputError(f"{label}: {problem}")
         return cls(
             joints=tuple(str(s.joint) for s in specs),
             ids=np.asarray(ids, dtype=np.int64),

@@ -44,7 +44,8 @@ from pathlib import Path
 import numpy as np
 
 from motok_robot.errors import HardwareError, InputError
-from motok_robot.npz_files import read_npz_fields
+from motok_robot.limits import check_frames, check_joints, check_rate, check_seconds
+from motok_robot.npz_files import read_npz_fields, scalar_field
 from motok_robot.servo import control_table as ct
 from motok_robot.servo.bus import (
     ServoAlertError,
@@ -58,6 +59,10 @@ from motok_robot.servo.config import ON_STOP_HOLD, PlaybackConfig
 from motok_robot.servo.convert import ServoMap, limit_command
 from motok_robot.servo.playback_log import PlaybackLog
 from motok_robot.servo.timing import LoopStats, RealClock, loop_stats, realtime_priority
+
+
+#: qpos columns before the joints in robot.npz: free base position (3) + quaternion wxyz (4)
+FREE_BASE = 7
 
 
 class PlaybackWarning(UserWarning):
@@ -94,7 +99,7 @@ class Trajectory:
 
 
 def load_trajectory(path: str | Path, servo_map: ServoMap, robot_name: str | None = None,
-                    report_path: str | Path | None = None) -> Trajectory:
+                    report_path: str | Path | None = None, robot_sha256: str | None = None) -> Trajectory:
     """Read ``robot.npz`` (CONTRACTS.md) and pick the servo joints' columns of ``qpos``.
 
     ``qpos`` is [T, nq] with the free base (7 values) first; the joint columns are the last
@@ -109,20 +114,33 @@ def load_trajectory(path: str | Path, servo_map: ServoMap, robot_name: str | Non
     for key in ("qpos", "joint_names", "fps"):
         if key not in fields:
             raise InputError(f"{path}: field '{key}' missing (robot.npz needs qpos, joint_names, robot, fps)")
-    qpos = np.asarray(fields["qpos"], dtype=np.float64)
-    names = [str(n) for n in np.atleast_1d(fields["joint_names"])]
-    fps = float(fields["fps"])
-    if qpos.ndim != 2 or qpos.shape[0] < 1:
-        raise InputError(f"{path}: field 'qpos' must be [T, nq] with T >= 1, got shape {qpos.shape}")
-    if len(names) > qpos.shape[1]:
-        raise InputError(f"{path}: {len(names)} joint_names but qpos has only {qpos.shape[1]} columns")
-    if not (math.isfinite(fps) and fps > 0):
-        raise InputError(f"{path}: field 'fps' must be a positive number, got {fps}")
+    qpos = np.asarray(fields["qpos"])
+    if qpos.ndim != 2 or qpos.shape[0] < 1 or not (np.issubdtype(qpos.dtype, np.number) and qpos.dtype.kind != "c"):
+        raise InputError(f"{path}: field 'qpos' must be a number array [T, nq] with T >= 1, got shape {qpos.shape} "
+                         f"({qpos.dtype})")
+    qpos = qpos.astype(np.float64)
+    raw_names = np.asarray(fields["joint_names"])
+    if raw_names.ndim > 1 or raw_names.dtype.kind not in "US":
+        raise InputError(f"{path}: field 'joint_names' must be a list of strings, got shape {raw_names.shape} "
+                         f"({raw_names.dtype})")
+    names = [str(n) for n in np.atleast_1d(raw_names)]
+    fps = scalar_field(fields, "fps", path)
+    check_rate(fps, str(path), "field 'fps'")
+    check_frames(qpos.shape[0], str(path), "field 'qpos' frames")
+    check_joints(len(names), str(path), "field 'joint_names' length")
+    check_seconds((qpos.shape[0] - 1) / fps, str(path), "the duration (qpos frames / fps)")
+    if len(set(names)) != len(names):
+        twice = sorted({n for n in names if names.count(n) > 1})
+        raise InputError(f"{path}: field 'joint_names' lists {', '.join(twice)} more than once")
+    if qpos.shape[1] != FREE_BASE + len(names):
+        raise InputError(f"{path}: field 'qpos' has {qpos.shape[1]} columns, but the free base ({FREE_BASE}) and "
+                         f"the {len(names)} joints of joint_names need {FREE_BASE + len(names)}: the joint columns "
+                         "cannot be matched to their names")
     if robot_name is not None and "robot" in fields:
         saved = str(fields["robot"])
         if saved and saved != robot_name and Path(saved).stem != robot_name:
             raise InputError(f"{path}: trajectory was made for robot '{saved}', not '{robot_name}'")
-    offset = qpos.shape[1] - len(names)
+    offset = FREE_BASE
     index = {n: i for i, n in enumerate(names)}
     missing = [j for j in servo_map.joints if j not in index]
     if missing:
@@ -130,7 +148,7 @@ def load_trajectory(path: str | Path, servo_map: ServoMap, robot_name: str | Non
     columns = [offset + index[j] for j in servo_map.joints]
     trajectory = Trajectory(q=qpos[:, columns].copy(), fps=fps, joints=servo_map.joints, source=path)
     report_path = Path(report_path) if report_path is not None else path.with_name("report.json")
-    goals = _validated_goals(path, report_path)
+    goals = _validated_goals(path, report_path, robot_sha256)
     if goals is not None:
         if goals["goals"].shape[0] != qpos.shape[0] or abs(goals["fps"] - fps) > 1e-9:
             raise InputError(f"{goals['path']}: {goals['goals'].shape[0]} frames at {goals['fps']} fps, "
@@ -144,10 +162,11 @@ def load_trajectory(path: str | Path, servo_map: ServoMap, robot_name: str | Non
     return trajectory
 
 
-def _validated_goals(path: Path, report_path: Path) -> dict | None:
+def _validated_goals(path: Path, report_path: Path, robot_sha256: str | None = None) -> dict | None:
     """The servo goals a validation report recorded for ``path``, or None when there is no
-    readable report, it validated other content (the report gate deals with that), or it
-    records no goals file.  A recorded file that is missing or altered is an InputError."""
+    readable report, it validated other content or (with ``robot_sha256``) another robot
+    description (the report gate deals with those), or it records no goals file.  A recorded
+    file that is missing or altered is an InputError."""
     from motok_robot.sim.feedforward import load_servo_goals
 
     try:
@@ -161,6 +180,8 @@ def _validated_goals(path: Path, report_path: Path) -> dict | None:
         return None
     if _sha256(path) != digest.lower():
         return None
+    if robot_sha256 is not None and _description_problem(report, report_path, robot_sha256) is not None:
+        return None
     goals_path = report_path.parent / str(record["file"])
     goals = load_servo_goals(goals_path, expected_sha256=record.get("sha256"))
     if goals["source_sha256"] and goals["source_sha256"] != digest.lower():
@@ -170,12 +191,17 @@ def _validated_goals(path: Path, report_path: Path) -> dict | None:
 
 
 def check_validation_report(trajectory_path: str | Path, report_path: str | Path | None = None, *,
-                            force: bool = False, robot_name: str | None = None) -> dict | None:
+                            force: bool = False, robot_name: str | None = None,
+                            robot_sha256: str | None = None) -> dict | None:
     """Require a passing validation report for ``trajectory_path``; returns the report (or None).
 
     The report is ``report_path`` or ``report.json`` next to the trajectory.  It must parse,
     have ``"passed": true``, name the same robot, and match the file: by ``input.sha256`` (the
-    digest of the validated robot.npz) when the report has it, else by file name.  Otherwise InputError, unless ``force`` (then a :class:`PlaybackWarning`).
+    digest of the validated robot.npz) when the report has it, else by file name.  With
+    ``robot_sha256`` (``Robot.description_sha256`` of the robot about to be played) the report
+    must also record that digest in ``robot_description.sha256``: limits validated on another
+    description (a widened copy, an edited TOML or MJCF) do not count.  Otherwise InputError,
+    unless ``force`` (then a :class:`PlaybackWarning`).
     """
     trajectory_path = Path(trajectory_path)
     path = Path(report_path) if report_path is not None else trajectory_path.with_name("report.json")
@@ -209,6 +235,8 @@ def check_validation_report(trajectory_path: str | Path, report_path: str | Path
                                f"{trajectory_path.name} changed after it was validated")
             elif validated is not None and Path(validated).name != trajectory_path.name:
                 problem = f"validation report {path} validated {validated}, not {trajectory_path.name}"
+            if problem is None and robot_sha256 is not None:
+                problem = _description_problem(report, path, robot_sha256)
     if problem is None:
         return report
     if not force:
@@ -217,6 +245,19 @@ def check_validation_report(trajectory_path: str | Path, report_path: str | Path
     warnings.warn(f"{trajectory_path}: playing WITHOUT a passing validation report ({problem}) because of --force",
                   PlaybackWarning, stacklevel=2)
     return report
+
+
+def _description_problem(report: dict, path: Path, robot_sha256: str) -> str | None:
+    """Why ``report`` does not bind the robot description with digest ``robot_sha256``, or None."""
+    record = report.get("robot_description")
+    recorded = record.get("sha256") if isinstance(record, dict) else None
+    if not isinstance(recorded, str) or not recorded:
+        return (f"validation report {path} records no robot description digest (robot_description.sha256); "
+                "it was written before reports bound the description: validate again")
+    if recorded.lower() != robot_sha256.lower():
+        return (f"validation report {path} was made with another robot description (sha256 {recorded[:12]}..., "
+                f"this robot's TOML + MJCF is {robot_sha256[:12]}...)")
+    return None
 
 
 def _sha256(path: Path) -> str:
@@ -236,6 +277,11 @@ def plan_targets(trajectory: Trajectory, start_ticks: np.ndarray, servo_map: Ser
     of the trajectory, linearly interpolated between frames, up to and including the last frame.
     """
     q = trajectory.q
+    where = str(trajectory.source or "trajectory")
+    check_rate(rate_hz, where, "the control rate")
+    check_rate(trajectory.fps, where, "the frame rate")
+    check_seconds(trajectory.duration_s, where, "the duration")
+    check_seconds(ramp_s, where, "the ramp time")
     n_ramp = int(round(ramp_s * rate_hz))
     n_play = int(math.floor(trajectory.duration_s * rate_hz + 1e-9)) + 1
     with np.errstate(invalid="ignore", over="ignore"):
@@ -601,9 +647,10 @@ def play_file(trajectory_path: str | Path, robot, bus: ServoBus, *, config: Play
               report_path: str | Path | None = None, force: bool = False, log_path: str | Path | None = None,
               clock=None, on_tick=None) -> PlaybackResult:
     """Gate on the validation report, load ``robot.npz`` for ``robot``, pre-flight and play."""
-    check_validation_report(trajectory_path, report_path, force=force, robot_name=robot.name)
+    digest = getattr(robot, "description_sha256", None)
+    check_validation_report(trajectory_path, report_path, force=force, robot_name=robot.name, robot_sha256=digest)
     servo_map = ServoMap.from_specs(robot.servos)
-    trajectory = load_trajectory(trajectory_path, servo_map, robot.name, report_path)
+    trajectory = load_trajectory(trajectory_path, servo_map, robot.name, report_path, robot_sha256=digest)
     streamer = Streamer(bus, servo_map, config, clock=clock, log_path=log_path, on_tick=on_tick)
     streamer.preflight()
     return streamer.play(trajectory)

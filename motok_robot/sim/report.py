@@ -46,7 +46,9 @@ Schema (``"schema": "motok-robot/validation-report/1"``)::
       "outputs": {"report": path, "plots": [path, ...], "video": path|null},
       "servo_goals": {"mode": "feedforward"|"reference",   # what the rollout's servos tracked
                       "file": "servo_goals.npz"|null,     # written next to report.json
-                      "sha256": str}|null                 # of the goal array; null without physics
+                      "sha256": str}|null,                # of the goal array; null without physics
+      "robot_description": {"name": str,                  # the robot description validated against
+                            "sha256": str|null}           # Robot.description_sha256 (TOML + MJCF bytes)
     }
 
 Check names: ``foot_skate_ratio``, ``foot_skate_distance``, ``penetration``, ``floating``,
@@ -342,6 +344,13 @@ def summary_text(report: dict) -> str:
         lines.append(f"  FAILED {key}: {_format_value(ch)} (must be {ch['comparison']} {_format_value(ch, 'threshold')}){extra}"
                      + (f"; frames {frames}" if frames else ""))
     return "\n".join(lines)
+
+
+def robot_description_record(index: RobotIndex) -> dict:
+    """``report["robot_description"]``: the digest of the description (TOML + MJCF bytes) the
+    report's limits came from; playback refuses a report whose digest differs from the robot it
+    loads (:func:`motok_robot.servo.streamer.check_validation_report`)."""
+    return {"name": index.name, "sha256": getattr(index, "description_sha256", None)}
 
 
 def write_report(report: dict, path: str | Path) -> Path:

@@ -19,7 +19,7 @@ from motok_robot.sim.config import ValidationConfig
 from motok_robot.sim.feedforward import GOALS_FILE, feedforward_goals, goals_digest, save_servo_goals, servo_gains
 from motok_robot.sim.kinematic import KinematicResult, replay
 from motok_robot.robots.index import RobotIndex, index_robot
-from motok_robot.sim.report import SCHEMA, build_checks, summary_text, write_report
+from motok_robot.sim.report import SCHEMA, build_checks, robot_description_record, summary_text, write_report
 from motok_robot.sim.rollout import RolloutResult, servo_model, simulate
 from motok_robot.sim.trajectory import RobotTrajectory, check_matches_robot, load_robot_npz
 
@@ -85,6 +85,7 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
             "mode": "feedforward" if config.servo_feedforward else "reference", "file": None,
             "sha256": goals_digest(goals)},
     }
+    report["robot_description"] = robot_description_record(index)
     result = ValidationResult(report=report, kinematic=kin, rollout=roll, index=index, goals=goals)
     if out_dir is not None:
         out_dir = Path(out_dir)
