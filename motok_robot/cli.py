@@ -51,6 +51,10 @@ def build_parser() -> argparse.ArgumentParser:
         description="Text -> human motion -> humanoid robot trajectory -> MuJoCo validation -> Dynamixel playback.",
     )
     parser.add_argument("--version", action="version", version=f"motok-robot {__version__}")
+    parser.add_argument("--limit", action="append", default=[], metavar="NAME=VALUE",
+                        help="raise a bound on input sizes for this run (frames, seconds, rate, min_rate, joints, "
+                             "file_bytes, inflated_bytes; the same as the MOTOK_MAX_* / MOTOK_MIN_RATE variables, "
+                             "see motok_robot/limits.py)")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")
     groups: dict = {}
     for module_name in REGISTRARS:
@@ -78,6 +82,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        from motok_robot.limits import set_limit
+
+        for assignment in args.limit:
+            set_limit(assignment)
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print("motok-robot: interrupted", file=sys.stderr)

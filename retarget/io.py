@@ -32,6 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from motok_robot.errors import InputError
+from motok_robot.limits import check_frames, check_rate, check_seconds
+from motok_robot.npz_files import check_npz_sizes, read_npz_fields, scalar_field
 
 MOCAP_SUFFIXES = (".bvh", ".amc", ".json", ".txt")
 
@@ -50,16 +52,17 @@ def read_motion_npz(path: str | Path) -> HumanMotion:
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: file not found")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            if "joints" not in data.files:
-                raise InputError(f"{path}: no 'joints' array (fields: {', '.join(data.files) or 'none'})")
-            joints = np.asarray(data["joints"])
-            fps = float(data["fps"]) if "fps" in data.files else 20.0
-    except InputError:
-        raise
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise InputError(f"{path}: cannot read as .npz ({exc})") from None
+    data = read_npz_fields(path, "motion file")
+    if "joints" not in data:
+        raise InputError(f"{path}: no 'joints' array (fields: {', '.join(data) or 'none'})")
+    joints = np.asarray(data["joints"])
+    if joints.ndim != 3 or joints.shape[1:] != (22, 3) or joints.shape[0] < 1 or joints.dtype.kind not in "fiu":
+        raise InputError(f"{path}: field 'joints' must be a number array [T, 22, 3] (metres, z up), got shape "
+                         f"{joints.shape} ({joints.dtype})")
+    fps = scalar_field(data, "fps", path) if "fps" in data else 20.0
+    check_rate(fps, str(path), "field 'fps'")
+    check_frames(joints.shape[0], str(path), "field 'joints' frames")
+    check_seconds((joints.shape[0] - 1) / fps, str(path), "the duration (joints frames / fps)")
     return HumanMotion(joints=joints, fps=fps, name=str(path))
 
 
@@ -157,6 +160,7 @@ def read_robot_npz(path: str | Path) -> RobotTrajectory:
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: file not found")
+    check_npz_sizes(path, "robot.npz")
     try:
         with np.load(path, allow_pickle=False) as d:
             missing = [f for f in ROBOT_NPZ_FIELDS if f not in d.files]

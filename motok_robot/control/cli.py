@@ -68,6 +68,10 @@ def generate_command(args: argparse.Namespace, planner_handler) -> int:
 
     if args.seconds is not None and args.seconds <= 0:
         raise InputError(f"--seconds must be positive (got {args.seconds:g})")
+    if args.seconds is not None:
+        from motok_robot.limits import check_seconds
+
+        check_seconds(args.seconds, "generate", "--seconds")  # before any array of that length exists
     config = control_config_from_args(args)
     frames = frames_from_args(args, FPS)
     constraints = constraints_from_args(args, frames)

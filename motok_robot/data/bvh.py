@@ -41,6 +41,8 @@ from motok_robot.data.clip import (
     zup_rotation,
 )
 from motok_robot.errors import InputError
+from motok_robot.limits import check_file_size, check_frames, check_rate, check_seconds, limit
+from motok_robot.limits import check_joints as check_joint_count
 from motok_robot.motion.features import resample
 from motok_robot.motion.rotations import rotation_about_axis
 
@@ -91,6 +93,8 @@ def read_bvh(source: str | Path, text: str | None = None) -> BvhMotion:
     where = str(source)
     if text is None:
         try:
+            if Path(source).is_file():
+                check_file_size(source, "BVH file")
             text = Path(source).read_text(encoding="utf-8", errors="replace")
         except IsADirectoryError:
             raise InputError(f"{where}: is a folder, not a BVH file") from None
@@ -106,6 +110,8 @@ def _parse_hierarchy(text: str, where: str) -> BvhSkeleton:
     if not tokens or tokens[0].upper() != "HIERARCHY":
         raise InputError(f"{where}: does not start with HIERARCHY (not a BVH file?)")
     joints: list[BvhJoint] = []
+    seen: set[str] = set()  # joint names so far (a set: parsing stays linear in the joints)
+    max_joints = limit("joints")
     stack: list[int] = []  # indices of open joint blocks (-2 marks an End Site block)
     pending: tuple[str, bool] | None = None
     column = 0
@@ -141,8 +147,11 @@ def _parse_hierarchy(text: str, where: str) -> BvhSkeleton:
                 raise InputError(f"{where}: '{{' without a ROOT/JOINT/End Site before it")
             name, is_end = pending
             parent = stack[-1] if stack else -1
-            if any(j.name == name for j in joints):
+            if name in seen:
                 raise InputError(f"{where}: joint name {name!r} appears twice")
+            seen.add(name)
+            if len(joints) + 1 > max_joints:
+                check_joint_count(len(joints) + 1, where, "the HIERARCHY's joints (End Sites included)")
             joints.append(BvhJoint(name, parent, np.zeros(3), is_end_site=is_end))
             stack.append(len(joints) - 1)
             pending = None
@@ -207,6 +216,9 @@ def _parse_motion(text: str, skeleton: BvhSkeleton, where: str) -> tuple[np.ndar
         raise InputError(f"{where}: MOTION has zero frames (Frames: {frames})")
     if not (frame_time > 0 and np.isfinite(frame_time)):
         raise InputError(f"{where}: Frame Time must be > 0 seconds, got {m.group(2)}")
+    check_frames(frames, where, "'Frames:'")
+    check_rate(1.0 / frame_time, where, f"the frame rate of 'Frame Time: {m.group(2)}'")
+    check_seconds(frames * frame_time, where, "the duration ('Frames:' x 'Frame Time:')")
     body = text[m.end():]
     ncols = skeleton.num_channels
     rows = [ln for ln in body.splitlines() if ln.strip()]

@@ -134,6 +134,10 @@ def generate_command(args: argparse.Namespace, generate_one=None) -> int:
         raise InputError(f"--decoder-seed must be >= 0 (got {args.decoder_seed})")
     if args.seconds is not None and args.seconds <= 0:
         raise InputError(f"--seconds must be positive (got {args.seconds:g})")
+    if args.seconds is not None:
+        from motok_robot.limits import check_seconds
+
+        check_seconds(args.seconds, "generate", "--seconds")
     if args.text is not None:
         check_text(args.text)
     prompts = read_prompts(args.prompts) if args.prompts is not None else None

@@ -66,13 +66,15 @@ def _robot_for(path, robot_arg, cache):
 
     name = robot_arg
     if not name:
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                name = str(data["robot"]) if "robot" in data.files else ""
-        except (OSError, ValueError) as exc:
-            raise InputError(f"{path}: not a readable .npz file ({exc})") from None
+        from motok_robot.npz_files import read_npz_fields
+        from motok_robot.robots.robot import installed_robot_name
+
+        fields = read_npz_fields(path, "trajectory file")
+        raw = np.asarray(fields["robot"]) if "robot" in fields else np.asarray("")
+        name = str(raw.reshape(()).item()) if raw.size == 1 else repr(raw.tolist())[:80]
         if not name:
             raise InputError(f"{path}: field 'robot' is missing; pass --robot NAME")
+        name = installed_robot_name(name, str(path))  # a data file may only name an installed robot
     if name not in cache:
         cache[name] = index_robot(load(name))
     return cache[name]

@@ -7,13 +7,14 @@ raises :class:`~motok_robot.errors.InputError` naming the file and the field.
 
 from __future__ import annotations
 
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from motok_robot.errors import InputError
+from motok_robot.limits import check_frames, check_joints, check_rate, check_seconds
+from motok_robot.npz_files import read_npz_fields, scalar_field
 
 
 @dataclass
@@ -50,24 +51,30 @@ def load_robot_npz(path: str | Path, robot=None) -> RobotTrajectory:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            fields = {key: data[key] for key in data.files}
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
-        raise InputError(f"{path}: not a readable .npz file ({exc})") from None
+    fields = read_npz_fields(path, "trajectory file")
     for key in ("qpos", "fps"):
         if key not in fields:
             raise InputError(f"{path}: field '{key}' is missing (robot.npz needs qpos, fps, joint_names)")
     qpos = np.asarray(fields["qpos"])
     if qpos.ndim != 2 or not np.issubdtype(qpos.dtype, np.number):
         raise InputError(f"{path}: field 'qpos' must be a number array [T, nq], got shape {qpos.shape} {qpos.dtype}")
+    fps = scalar_field(fields, "fps", path)
+    check_rate(fps, str(path), "field 'fps'")
+    check_frames(qpos.shape[0], str(path), "field 'qpos' frames")
+    check_joints(qpos.shape[1], str(path), "field 'qpos' columns")
+    check_seconds((qpos.shape[0] - 1) / fps, str(path), "the duration (qpos frames / fps)")
     qpos = qpos.astype(np.float64)
-    try:
-        fps = float(np.asarray(fields["fps"]).reshape(()))
-    except (TypeError, ValueError):
-        raise InputError(f"{path}: field 'fps' must be one number") from None
-    names = [str(n) for n in np.asarray(fields.get("joint_names", np.array([], dtype=str))).reshape(-1)]
-    robot_name = str(np.asarray(fields["robot"]).reshape(())) if "robot" in fields else ""
+    raw_names = np.asarray(fields.get("joint_names", np.array([], dtype=str)))
+    if raw_names.ndim > 1 or (raw_names.size and raw_names.dtype.kind not in "US"):
+        raise InputError(f"{path}: field 'joint_names' must be a list of strings, got shape {raw_names.shape} "
+                         f"({raw_names.dtype})")
+    names = [str(n) for n in raw_names.reshape(-1)]
+    robot_name = ""
+    if "robot" in fields:
+        raw_robot = np.asarray(fields["robot"])
+        if raw_robot.size != 1 or raw_robot.dtype.kind not in "US":
+            raise InputError(f"{path}: field 'robot' must be one string, got shape {raw_robot.shape} ({raw_robot.dtype})")
+        robot_name = str(raw_robot.reshape(()))
     contacts = None
     if "contacts" in fields:
         contacts = np.asarray(fields["contacts"]).astype(bool)
