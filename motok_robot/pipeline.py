@@ -115,24 +115,32 @@ def load_source_motion(path, skeleton: str = "bandai", asf=None) -> SourceMotion
     from retarget.io import read_input
 
     p = Path(path)
+    text, model = f"motion:{p.name}", f"file:{p.name}"
     if p.suffix.lower() == ".npz":
-        try:
-            with np.load(p, allow_pickle=False) as data:
-                if {"joints", "features"} <= set(data.files):
-                    text = str(data["text"]) if "text" in data.files else ""
-                    model = str(data["model"]) if "model" in data.files else ""
-                    return SourceMotion(np.asarray(data["joints"], np.float32), np.asarray(data["features"], np.float32),
-                                        text or f"motion:{p.name}", model or f"file:{p.name}")
-        except (OSError, ValueError) as exc:
-            raise InputError(f"{p}: cannot read as .npz ({exc})") from None
-    human = read_input(p, skeleton=skeleton, asf=asf)
+        from motok_robot.npz_files import read_npz_fields
+        from retarget.io import read_motion_npz
+
+        data = read_npz_fields(p, "motion file")
+        human = read_motion_npz(p)  # joints [T, 22, 3], fps and the size bounds checked, as retarget does
+        text = str(data["text"]) if "text" in data and data["text"].size == 1 and str(data["text"]) else text
+        model = str(data["model"]) if "model" in data and data["model"].size == 1 and str(data["model"]) else model
+        features = np.asarray(data["features"]) if "features" in data else None
+        if features is not None and abs(human.fps - 20.0) <= 1e-6:  # as generated: used as it is
+            if features.ndim != 2 or features.shape[1] != 263 or features.dtype.kind != "f":
+                raise InputError(f"{p}: field 'features' must be a float array [T, 263], got shape {features.shape} "
+                                 f"({features.dtype})")
+            return SourceMotion(np.asarray(human.joints, np.float32), features.astype(np.float32), text, model)
+        # at another frame rate the saved features (defined at 20 fps) do not apply: resample the
+        # joints (the file's fps is honoured, as retarget honours it) and recompute them
+    else:
+        human = read_input(p, skeleton=skeleton, asf=asf)
     if abs(human.fps - 20.0) > 1e-6:
         from motok_robot.motion.features import resample
 
         human.joints = resample(human.joints, human.fps, 20.0)
     features = features_from_joints(human.joints)
     joints = joints_from_features(features).astype(np.float32)
-    return SourceMotion(joints, features.astype(np.float32), f"motion:{p.name}", f"file:{p.name}")
+    return SourceMotion(joints, features.astype(np.float32), text, model)
 
 
 # ----------------------------------------------------------------------------- configuration
@@ -302,6 +310,9 @@ def check_seconds(seconds, where: str = "seconds") -> float | None:
         raise InputError(f"{where} must be a number, got {seconds!r}")
     if seconds <= 0:
         raise InputError(f"{where} must be positive, got {seconds:g}")
+    from motok_robot.limits import check_seconds as check_duration
+
+    check_duration(float(seconds), where.split(":")[0], where)
     return float(seconds)
 
 
