@@ -33,6 +33,8 @@ whose real stiffness differs from the robot description gets a proportionally wr
     robot         str
     mode          str              "feedforward" (or "reference": goals = the joint angles)
     source_sha256 str              sha256 of the robot.npz the goals were computed from
+    balance_*                      the balance controller's plan when validation ran closed loop
+                                   (:class:`motok_robot.feasibility.balance.BalancePlan`)
 """
 
 from __future__ import annotations
@@ -101,19 +103,21 @@ def goals_digest(goals: np.ndarray) -> str:
 
 
 def save_servo_goals(path: str | Path, goals: np.ndarray, joint_names, fps: float, robot: str, mode: str,
-                     source_sha256: str | None) -> Path:
-    """Write ``servo_goals.npz`` (schema in the module docstring)."""
+                     source_sha256: str | None, plan=None) -> Path:
+    """Write ``servo_goals.npz`` (schema in the module docstring), with the balance
+    controller's ``plan`` (:class:`~motok_robot.feasibility.balance.BalancePlan`) when given."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    extra = plan.fields() if plan is not None else {}
     np.savez(path, goals=np.asarray(goals, dtype=np.float64), joint_names=np.asarray(list(joint_names)),
              fps=np.float64(fps), robot=np.asarray(robot), mode=np.asarray(mode),
-             source_sha256=np.asarray(source_sha256 or ""))
+             source_sha256=np.asarray(source_sha256 or ""), **extra)
     return path
 
 
 def load_servo_goals(path: str | Path, *, expected_sha256: str | None = None) -> dict:
     """Read ``servo_goals.npz``; with ``expected_sha256`` (from report.json) the goal array must
-    match it.  Returns ``{"goals", "joint_names", "fps", "robot", "mode", "source_sha256"}``.
+    match it.  Returns ``{"goals", "joint_names", "fps", "robot", "mode", "source_sha256", "plan"}`` ("plan": the balance plan or None).
     Raises :class:`InputError` naming the file and the field."""
     path = Path(path)
     fields = read_npz_fields(path, "servo goals file")  # validation writes it next to report.json
@@ -132,5 +136,11 @@ def load_servo_goals(path: str | Path, *, expected_sha256: str | None = None) ->
         raise InputError(f"{path}: field 'mode' is {mode!r}, expected one of {', '.join(MODES)}")
     if expected_sha256 and goals_digest(goals) != expected_sha256:
         raise InputError(f"{path}: goals differ from the validated ones (sha256 {expected_sha256[:12]}... in the report)")
+    from motok_robot.feasibility.balance import BalancePlan
+
+    plan = BalancePlan.from_fields(fields, len(names), str(path))
+    if plan is not None and plan.num_frames != goals.shape[0]:
+        raise InputError(f"{path}: field 'balance_down' has {plan.num_frames} frames, 'goals' {goals.shape[0]}")
     return {"goals": goals, "joint_names": names, "fps": float(fields["fps"]),
-            "robot": str(fields.get("robot", "")), "mode": mode, "source_sha256": str(fields.get("source_sha256", ""))}
+            "robot": str(fields.get("robot", "")), "mode": mode, "source_sha256": str(fields.get("source_sha256", "")),
+            "plan": plan}

@@ -31,13 +31,15 @@ Tracking RMSE and base drift are measured at the reference frame times before th
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
+from motok_robot.feasibility.balance import BalanceController, BalancePlan
+from motok_robot.feasibility.physics import ServoPhysics
+from motok_robot.feasibility.physics import servo_model as physics_servo_model
 from motok_robot.sim.config import ValidationConfig
 from motok_robot.sim.dynamics import finite_difference_qvel
 from motok_robot.sim.geometry import convex_hull, signed_distance
@@ -71,26 +73,9 @@ class RolloutResult:
 
 
 def servo_model(index: RobotIndex, config: ValidationConfig) -> tuple[mujoco.MjModel, np.ndarray]:
-    """Copy of the robot model ready for tracking, and each actuator's gear [nu]."""
-    model = copy.deepcopy(index.model)
-    if config.physics_timestep_s > 0:
-        model.opt.timestep = config.physics_timestep_s
-    gear = model.actuator_gear[:, 0].copy()
-    gear[gear == 0] = 1.0
-    for a in range(model.nu):
-        if index.actuator_is_position[a] or index.actuator_joint[a] < 0:
-            continue
-        limit = float(np.max(np.abs(model.actuator_forcerange[a]))) if model.actuator_forcelimited[a] else 0.0
-        if limit <= 0:
-            limit = float(index.torque_limit[index.actuator_joint[a]])
-        kp = config.motor_kp_per_nm * limit
-        kd = config.motor_kd_ratio * kp
-        model.actuator_gaintype[a] = mujoco.mjtGain.mjGAIN_FIXED
-        model.actuator_gainprm[a, :3] = [kp / gear[a] ** 2, 0, 0]
-        model.actuator_biastype[a] = mujoco.mjtBias.mjBIAS_AFFINE
-        model.actuator_biasprm[a, :3] = [0.0, -kp / gear[a] ** 2, -kd / gear[a] ** 2]
-        model.actuator_ctrllimited[a] = 0
-    return model, gear
+    """Copy of the robot model ready for tracking, and each actuator's gear [nu]
+    (:func:`motok_robot.feasibility.physics.servo_model` with the validation settings)."""
+    return physics_servo_model(index, config.physics_timestep_s, config.motor_kp_per_nm, config.motor_kd_ratio)
 
 
 def _up_axis(quat: np.ndarray) -> np.ndarray:
@@ -100,12 +85,14 @@ def _up_axis(quat: np.ndarray) -> np.ndarray:
 
 
 def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: ValidationConfig,
-             goals: np.ndarray | None = None) -> RolloutResult:
+             goals: np.ndarray | None = None, plan: BalancePlan | None = None) -> RolloutResult:
     """Roll the robot out in physics tracking ``qpos`` [T, nq] (frames at ``fps``).
 
     ``goals`` [T, nj] (rad, robot joint order) are the servo goals when they differ from the
     reference joint angles (feedforward, :mod:`motok_robot.sim.feedforward`); tracking error,
-    drift and falls are always measured against ``qpos``."""
+    drift and falls are always measured against ``qpos``.  With a balance ``plan`` the robot runs
+    closed loop: the balance controller corrects the goals at its rate from the simulated IMU
+    (:mod:`motok_robot.feasibility.physics`), goals held over each controller tick."""
     import time as _time
 
     start = _time.perf_counter()
@@ -117,27 +104,38 @@ def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: Validation
     ref_time = np.arange(T) / fps
     step_end = (np.arange(nstep) + 1) * dt
 
-    # controls [nstep, nu]: target angle at each step's end time, times the gear
-    control = np.zeros((nstep, model.nu))
-    for a in range(model.nu):
-        j = index.actuator_joint[a]
-        if j < 0:
-            continue
-        column = qpos[:, index.qpos_adr[j]] if goals is None else goals[:, j]
-        target = np.interp(step_end, ref_time, column)
-        control[:, a] = gear[a] * target
-
-    data = mujoco.MjData(model)
-    data.qpos[:] = qpos[0]
+    goal_frames = qpos[:, index.qpos_adr] if goals is None else np.asarray(goals, dtype=np.float64)
     qvel_ref = finite_difference_qvel(model, qpos[: min(T, 3)], fps)
-    data.qvel[:] = qvel_ref[0]
-    data.ctrl[:] = control[0]
-    mujoco.mj_forward(model, data)
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    initial = np.zeros(mujoco.mj_stateSize(model, spec))
-    mujoco.mj_getState(model, data, initial, spec)
-    states, _ = mj_rollout.rollout(model, data, initial[None], control[None])
-    states = states[0]  # [nstep, nstate] state after each step
+    data = mujoco.MjData(model)
+    if plan is None:
+        # open loop: controls [nstep, nu], the target angle at each step's end time times the gear
+        control = np.zeros((nstep, model.nu))
+        for a in range(model.nu):
+            j = index.actuator_joint[a]
+            if j >= 0:
+                control[:, a] = gear[a] * np.interp(step_end, ref_time, goal_frames[:, j])
+        data.qpos[:] = qpos[0]
+        data.qvel[:] = qvel_ref[0]
+        data.ctrl[:] = control[0]
+        mujoco.mj_forward(model, data)
+        initial = np.zeros(mujoco.mj_stateSize(model, spec))
+        mujoco.mj_getState(model, data, initial, spec)
+        states, _ = mj_rollout.rollout(model, data, initial[None], control[None])
+        states = states[0]  # [nstep, nstate] state after each step
+    else:
+        physics = ServoPhysics(index, rate_hz=plan.config.rate_hz, model=model)
+        initial = physics.initial_state(qpos[0], qvel_ref[0], goal_frames[0])
+        controller = BalanceController(plan, index.joint_range)
+        out = physics.run(initial[None], goal_frames, fps, duration, controller)
+        states = out["states"][0]
+        nstep = states.shape[0]
+        step_end = out["step_time"]
+        tick_of_step = np.arange(nstep) // physics.steps_per_tick
+        control = np.zeros((nstep, model.nu))
+        for j, a in enumerate(physics.actuator_of_joint):
+            if a >= 0:
+                control[:, a] = gear[a] * out["commands"][0, tick_of_step, j]
     all_qpos = states[:, 1:1 + model.nq]
 
     # per-step fall detection against the reference interpolated at each step's end

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from motok_robot import __version__
+from motok_robot.feasibility import BalanceConfig, BalancePlan, build_plan
 from motok_robot.sim.config import ValidationConfig
 from motok_robot.sim.feedforward import GOALS_FILE, feedforward_goals, goals_digest, save_servo_goals, servo_gains
 from motok_robot.sim.kinematic import KinematicResult, replay
@@ -33,6 +34,7 @@ class ValidationResult:
     rollout: RolloutResult | None
     index: RobotIndex
     goals: np.ndarray | None = None  # [T, nj] servo goals of the rollout (None without physics)
+    plan: BalancePlan | None = None  # the balance controller's plan (None: open loop)
 
     @property
     def passed(self) -> bool:
@@ -44,7 +46,8 @@ class ValidationResult:
 
 def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationConfig | None = None,
                         out_dir: str | Path | None = None, physics: bool = True, plots: bool = True,
-                        render: bool = False, input_sha256: str | None = None) -> ValidationResult:
+                        render: bool = False, input_sha256: str | None = None,
+                        balance: BalanceConfig | None = None) -> ValidationResult:
     """Validate ``trajectory`` on ``robot`` (a ``Robot`` or a prebuilt :class:`RobotIndex`).
 
     With ``out_dir``, writes ``report.json``, the PNG plots (``plots``) and ``validation.mp4``
@@ -54,12 +57,17 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
     file's digest) is recorded in ``input`` so a later stage can check that the file it plays
     is the one validated.  Raises :class:`~motok_robot.errors.InputError` when the trajectory
     does not fit the robot.
+
+    ``balance`` (a :class:`~motok_robot.feasibility.config.BalanceConfig`, default: the robot's
+    defaults) runs the rollout closed loop with the balance controller, whose plan is built from
+    this trajectory and stored with the servo goals, so playback runs the same controller;
+    ``BalanceConfig(enabled=False)`` plays the goals open loop.
     """
     config = config or ValidationConfig()
     index = robot if isinstance(robot, RobotIndex) else index_robot(robot)
     check_matches_robot(trajectory, _RobotView(index), where=trajectory.source or "trajectory")
     timing = {}
-    roll = goals = None
+    roll = goals = plan = None
     start = time.perf_counter()
     kin = replay(index, trajectory.qpos, trajectory.fps, config)
     timing["kinematic"] = time.perf_counter() - start
@@ -70,7 +78,10 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
             stiffness = np.zeros_like(stiffness)  # the reference angles (still within the servo's limits)
         goals = feedforward_goals(index, kin.joint_pos, kin.joint_vel, kin.torque, trajectory.fps, stiffness, damping,
                                   config.servo_goal_velocity_fraction)
-        roll = simulate(index, trajectory.qpos, trajectory.fps, config, goals=goals)
+        balance = balance if balance is not None else BalanceConfig()
+        if balance.enabled:
+            plan = build_plan(index, trajectory.qpos, trajectory.fps, kin.contact, balance)
+        roll = simulate(index, trajectory.qpos, trajectory.fps, config, goals=goals, plan=plan)
         timing["physics"] = time.perf_counter() - start
     checks, metrics, per_foot, per_joint = build_checks(index, kin, roll, config, trajectory.contacts)
     report = {
@@ -86,7 +97,9 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
             "sha256": goals_digest(goals)},
     }
     report["robot_description"] = robot_description_record(index)
-    result = ValidationResult(report=report, kinematic=kin, rollout=roll, index=index, goals=goals)
+    if plan is not None:
+        report["servo_goals"]["balance"] = plan.config.to_dict()
+    result = ValidationResult(report=report, kinematic=kin, rollout=roll, index=index, goals=goals, plan=plan)
     if out_dir is not None:
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -126,7 +139,8 @@ def write_servo_goals(result: ValidationResult, out_dir: str | Path) -> Path | N
         return None
     report = result.report
     path = save_servo_goals(Path(out_dir) / GOALS_FILE, result.goals, result.index.joint_names, report["input"]["fps"],
-                            result.index.name, report["servo_goals"]["mode"], report["input"]["sha256"])
+                            result.index.name, report["servo_goals"]["mode"], report["input"]["sha256"],
+                            plan=result.plan)
     report["servo_goals"]["file"] = GOALS_FILE
     return path
 

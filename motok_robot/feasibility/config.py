@@ -1,0 +1,134 @@
+"""Settings of the feasibility stage: the balance controller and the physics refinement.
+
+Units: radians, seconds, hertz.  Gains are dimensionless (rad of joint goal per rad of torso
+tilt error) or seconds (rad of joint goal per rad/s of torso rate error).  The per-robot
+defaults are documented in docs/feasibility.md with the measurements behind them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+from motok_robot.errors import InputError
+
+#: the leg joints the balance controller moves, by role (inferred from the kinematic chain
+#: from each sole up to the base: the first pitch joint is the ankle, the last the hip, pitch
+#: joints between them are knees; the first roll joint is the ankle's, the last the hip's)
+ROLES = ("ankle_pitch", "ankle_roll", "knee", "hip_pitch", "hip_roll")
+
+
+def _default_tilt_gain() -> dict:
+    # ankle strategy first, the hip helping: an ankle goal offset of 0.6 rad per rad of torso
+    # tilt on a 21 N m/rad servo gives 12.6 N m/rad, above the 7.8 N m/rad gravity toppling
+    # stiffness of a 3.2 kg robot with its CoM 0.25 m above the ankles
+    return {"ankle_pitch": 0.6, "ankle_roll": 0.5, "knee": 0.0, "hip_pitch": 0.3, "hip_roll": 0.3}
+
+
+def _default_rate_gain() -> dict:
+    # gyro damping (s): the ROBOTIS OP3 walk's gyro feedback (0.05 x gains 0.9 / 0.7 / 0.3 / 0.35
+    # on ankle pitch / ankle roll / knee / hip roll), with the hip pitch given the hip roll's
+    return {"ankle_pitch": 0.045, "ankle_roll": 0.035, "knee": 0.015, "hip_pitch": 0.0175, "hip_roll": 0.0175}
+
+
+@dataclass(frozen=True)
+class BalanceConfig:
+    """The closed-loop balance controller (:mod:`motok_robot.feasibility.balance`)."""
+
+    #: run the controller (False: the servo goals are streamed open loop, as before)
+    enabled: bool = True
+    #: controller rate (Hz): one IMU + present-position read and one goal write per tick; the
+    #: OP3's bus cycle is 8 ms
+    rate_hz: float = 125.0
+    #: goal offset per rad of torso tilt error (estimated minus reference), per joint role
+    tilt_gain: dict = field(default_factory=_default_tilt_gain)
+    #: goal offset per rad/s of torso rate error (gyro minus reference), per joint role
+    rate_gain: dict = field(default_factory=_default_rate_gain)
+    #: share of the correction a leg gets while it is not in support (1 = as a stance leg)
+    swing_share: float = 0.0
+    #: per-tick weight of the accelerometer in the tilt estimate (complementary filter; 0.02
+    #: at 125 Hz is a 0.4 s time constant: the gyro carries the fast part)
+    accel_weight: float = 0.02
+    #: first-order low-pass of the gyro (weight of the new sample; the ROBOTIS driver uses 0.4)
+    gyro_filter: float = 0.5
+    #: the correction of one joint is clamped to this (rad)
+    max_offset_rad: float = 0.35
+
+    def __post_init__(self):
+        for name in ("tilt_gain", "rate_gain"):
+            gains = getattr(self, name)
+            unknown = sorted(set(gains) - set(ROLES))
+            if unknown:
+                raise InputError(f"balance {name}: unknown joint role(s) {', '.join(unknown)}; known: {', '.join(ROLES)}")
+            for role, value in gains.items():
+                if not (isinstance(value, (int, float)) and abs(float(value)) < 10):
+                    raise InputError(f"balance {name}.{role} = {value!r}: expected a number of magnitude < 10")
+        checks = (("rate_hz", 1.0, 2000.0), ("swing_share", 0.0, 1.0), ("accel_weight", 0.0, 1.0),
+                  ("gyro_filter", 1e-3, 1.0), ("max_offset_rad", 0.0, 1.0))
+        for name, low, high in checks:
+            value = float(getattr(self, name))
+            if not low <= value <= high:
+                raise InputError(f"balance {name} = {value}: must lie in [{low}, {high}]")
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, values: dict) -> "BalanceConfig":
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise InputError(f"balance settings: unknown key(s) {', '.join(unknown)}")
+        merged = cls().to_dict()
+        for key, value in values.items():
+            merged[key] = {**merged[key], **value} if isinstance(merged[key], dict) else value
+        return cls(**merged)
+
+
+@dataclass(frozen=True)
+class RefineConfig:
+    """The receding-horizon predictive-sampling refinement (:mod:`motok_robot.feasibility.refine`)."""
+
+    #: candidate rollouts per planning step (the first is the current plan unchanged)
+    samples: int = 16
+    #: planning horizon (s); MuJoCo MPC's OP3 task plans over 0.35 s
+    horizon_s: float = 0.4
+    #: re-plan interval (s): the best candidate's first part is executed for this long
+    replan_s: float = 0.1
+    #: spacing of the spline knots of the goal offsets (s); offsets are linear between knots
+    knot_s: float = 0.1
+    #: standard deviation of the knot perturbations (rad)
+    noise_rad: float = 0.05
+    #: largest offset the refinement may add to a goal (rad)
+    max_offset_rad: float = 0.4
+    #: which joints get offsets: "legs" (the balance controller's leg joints and hip yaws) or "all"
+    joints: str = "legs"
+    #: cost weights (per second of motion): torso attitude (rad^2), base height (m^2, per
+    #: robot height^2), base position (m^2 per height^2), soles (m^2 per height^2), joint
+    #: angles (rad^2, mean over joints), offsets (rad^2, mean)
+    w_tilt: float = 20.0
+    w_height: float = 200.0
+    w_base: float = 20.0
+    w_feet: float = 100.0
+    w_joints: float = 1.0
+    w_effort: float = 0.5
+    #: torso tilt from the reference beyond which a candidate is counted as falling (rad)
+    fall_tilt_rad: float = 0.7
+    #: cost added per second spent fallen
+    fall_cost: float = 1000.0
+    #: seed of the perturbations (the result is deterministic for a given seed)
+    seed: int = 0
+
+    def __post_init__(self):
+        if not 1 <= int(self.samples) <= 4096:
+            raise InputError(f"refine samples = {self.samples}: must lie in [1, 4096]")
+        for name, low, high in (("horizon_s", 0.01, 5.0), ("replan_s", 0.008, 5.0), ("knot_s", 0.01, 2.0),
+                                ("noise_rad", 0.0, 1.0), ("max_offset_rad", 0.0, 1.5)):
+            value = float(getattr(self, name))
+            if not low <= value <= high:
+                raise InputError(f"refine {name} = {value}: must lie in [{low}, {high}]")
+        if self.joints not in ("legs", "all"):
+            raise InputError(f"refine joints = {self.joints!r}: use legs or all")
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
