@@ -51,7 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Text -> human motion -> humanoid robot trajectory -> MuJoCo validation -> Dynamixel playback.",
     )
     parser.add_argument("--version", action="version", version=f"motok-robot {__version__}")
-    parser.add_argument("--limit", action="append", default=[], metavar="NAME=VALUE",
+    parser.add_argument("--limit", action="append", default=[], metavar="NAME=VALUE", dest="size_limits",
                         help="raise a bound on input sizes for this run (frames, seconds, rate, min_rate, joints, "
                              "file_bytes, inflated_bytes; the same as the MOTOK_MAX_* / MOTOK_MIN_RATE variables, "
                              "see motok_robot/limits.py)")
@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         from motok_robot.limits import set_limit
 
-        for assignment in args.limit:
+        for assignment in getattr(args, "size_limits", None) or []:
             set_limit(assignment)
         return int(args.func(args) or 0)
     except KeyboardInterrupt:

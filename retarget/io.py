@@ -85,10 +85,14 @@ def read_mocap(path: str | Path, skeleton: str = "bandai", asf: str | Path | Non
             from motok_robot.data.asf_amc import load_clip
 
             if asf is None:
-                candidates = sorted(path.parent.glob("*.asf"))
-                if len(candidates) != 1:
-                    raise InputError(f"{path}: give the skeleton file with --asf ({len(candidates)} .asf files next to it)")
-                asf = candidates[0]
+                from motok_robot.data.sources import skeleton_for
+
+                candidates = {p.stem: p for p in sorted(path.parent.glob("*.asf"))}
+                stem = skeleton_for(path.stem, candidates)
+                if stem is None:
+                    raise InputError(f"{path}: give the skeleton file with --asf ({len(candidates)} .asf files next to "
+                                     "it, none whose name is a prefix of its own)")
+                asf = candidates[stem]
             clip = load_clip(asf, path, fps=amc_fps)
         elif suffix in (".json", ".txt"):
             from motok_robot.data.deepmimic import load_clip

@@ -45,6 +45,10 @@ def register(commands, groups) -> None:
     p.add_argument("--workers", type=int, default=2, help="worker processes (default 2; 1 = in-process)")
     p.add_argument("--asf-fps", type=float, default=120.0, help="frame rate of 'asf' AMC files (default 120)")
     p.add_argument("--overwrite", action="store_true", help="replace a prepared dataset already in --out")
+    p.add_argument("--allow-skips", action="store_true",
+                   help="finish even when more than --max-skip-share of the files are skipped (each is listed)")
+    p.add_argument("--max-skip-share", type=float, default=0.05,
+                   help="share of skipped files above which prepare fails unless --allow-skips (default 0.05)")
     p.set_defaults(func=_prepare)
 
     s = data.add_parser(
@@ -65,6 +69,8 @@ def _prepare(args: argparse.Namespace) -> int:
         raise InputError(f"--limit must be >= 1, got {args.limit}")
     if args.workers < 1:
         raise InputError(f"--workers must be >= 1, got {args.workers}")
+    if not 0.0 <= args.max_skip_share <= 1.0:
+        raise InputError(f"--max-skip-share must lie in 0..1, got {args.max_skip_share}")
     joint_map = None
     for item in args.joint_map or []:
         kind, sep, path = item.partition("=")
@@ -77,7 +83,7 @@ def _prepare(args: argparse.Namespace) -> int:
     cfg = PrepareConfig(
         sources=list(args.source), out=args.out, texts=args.texts, joint_map=joint_map, mirror=args.mirror,
         seed=args.seed, split_by=args.split_by, limit=args.limit, workers=args.workers, asf_fps=args.asf_fps,
-        overwrite=args.overwrite,
+        overwrite=args.overwrite, allow_skips=args.allow_skips, max_skip_share=args.max_skip_share,
     )
     summary = prepare(cfg)
     print(format_summary(summary))

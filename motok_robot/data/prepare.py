@@ -61,6 +61,8 @@ class PrepareConfig:
     asf_fps: float = 120.0
     overwrite: bool = False
     progress: bool | None = None  # tqdm disable=None: quiet when not a TTY
+    max_skip_share: float = 0.05  # more skipped files than this share of all files is an error ...
+    allow_skips: bool = False  # ... unless this is set (``--allow-skips``)
 
 
 def file_name(clip_id: str) -> str:
@@ -321,6 +323,12 @@ def prepare(cfg: PrepareConfig) -> dict:
         reasons = "; ".join(f"{s['file']}: {s['reason']}" for s in skipped[:5])
         raise InputError(f"nothing usable: 0 clips prepared from {len(cfg.sources)} source(s); " + (reasons or "no motion files found"))
 
+    seen_files = sum(s.files + s.skipped for s in stats.values())
+    if skipped and not cfg.allow_skips and len(skipped) > cfg.max_skip_share * seen_files:
+        reasons = "; ".join(f"{s['file']}: {s['reason']}" for s in skipped[:3])
+        raise InputError(f"{len(skipped)} of {seen_files} files skipped ({len(skipped) / seen_files:.0%}, more than "
+                         f"{cfg.max_skip_share:.0%}); the dataset in {out} is left unfinished (no summary.json). First: "
+                         f"{reasons}. Each skipped file was listed above; pass --allow-skips to accept them")
     for split, ids in splits.items():
         (out / "splits" / f"{split}.txt").write_text("".join(i + "\n" for i in ids))
     if given_mean_std is not None:

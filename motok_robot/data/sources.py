@@ -184,21 +184,33 @@ def _acrnn_readme(text: str) -> dict[str, float]:
     return out
 
 
+def skeleton_for(amc_stem: str, asf_stems) -> str | None:
+    """The skeleton (ASF stem) of a motion file: the longest ASF stem that is a prefix of
+    ``amc_stem`` ending at a separator (``HDM_tr`` for ``HDM_tr_squat1Reps_001_120``, ``01`` for
+    ``01_02``; never ``1`` for ``10_01``), else the only ASF of the folder, else None."""
+    best = None
+    for stem in asf_stems:
+        if amc_stem == stem or (amc_stem.startswith(stem) and not amc_stem[len(stem)].isalnum()):
+            if best is None or len(stem) > len(best):
+                best = stem
+    if best is None and len(asf_stems) == 1:
+        best = next(iter(asf_stems))
+    return best
+
+
 def _asf_jobs(kind: str, path: Path, options: SourceOptions) -> Iterator[Job | Skipped]:
-    """Pair every AMC with the ASF of its folder (``SS_TT.amc`` -> ``SS.asf``, else the only ASF)."""
+    """Pair every AMC with the ASF of its folder (:func:`skeleton_for`: the longest ASF name that
+    prefixes the AMC's, ``SS_TT.amc`` -> ``SS.asf``, else the only ASF). An AMC is paired as soon
+    as a matching ASF has been read (in sorted order an ASF comes before the AMC files it prefixes);
+    one read before its ASF waits for it."""
     asfs: dict[str, dict[str, str]] = {}  # folder -> {stem: text}
     pending: list[tuple[str, str]] = []  # (member, amc text) waiting for their ASF
 
     def pair(member: str, text: str) -> Job | Skipped | None:
         pp = PurePosixPath(member)
         folder = asfs.get(str(pp.parent), {})
-        stem = pp.stem
-        subject = stem.split("_")[0]
-        if subject in folder:
-            asf_name = subject
-        elif len(folder) == 1:
-            asf_name = next(iter(folder))
-        else:
+        asf_name = skeleton_for(pp.stem, folder)
+        if asf_name is None:
             return None
         meta = {"member": member, "asf": str(pp.parent / (asf_name + ".asf"))}
         return Job(kind, _label(path, member), {"asf": folder[asf_name], "amc": text}, meta)
@@ -225,7 +237,9 @@ def _asf_jobs(kind: str, path: Path, options: SourceOptions) -> Iterator[Job | S
                 yield job
     for m, _text in pending:
         folder = asfs.get(str(PurePosixPath(m).parent), {})
-        why = "no .asf skeleton file in its folder" if not folder else f"several .asf files ({sorted(folder)}) and none named after it"
+        why = ("no .asf skeleton file in its folder" if not folder else
+               f"several .asf files ({sorted(folder)[:5]}{' ...' if len(folder) > 5 else ''}) and none whose name "
+               "is a prefix of its own")
         yield Skipped(_label(path, m), why)
 
 
