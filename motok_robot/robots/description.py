@@ -98,12 +98,28 @@ class ServoSpec:
 
 
 @dataclass(frozen=True)
+class ImuSpec:
+    """The torso IMU on the servo bus (``[bus.imu]``): a ROBOTIS OpenCR sub-controller at ``id``.
+
+    ``axes`` says how the sensor is mounted: entry ``i`` names the sensor axis (``"x"``,
+    ``"y"``, ``"z"``, with a leading ``-`` when it points the other way) that gives axis ``i``
+    (x, y, z) of the robot's IMU frame (the MJCF's ``imu`` site, else the base body).  The
+    ROBOTIS OP3 mounts it with x and y reversed: ``["-x", "-y", "z"]``.
+    """
+
+    id: int = 200
+    axes: tuple[str, str, str] = ("-x", "-y", "z")
+
+
+@dataclass(frozen=True)
 class BusSpec:
-    """The servo bus: Dynamixel protocol version, baud rate (bit/s), control cycle (Hz)."""
+    """The servo bus: Dynamixel protocol version, baud rate (bit/s), control cycle (Hz), and
+    the IMU on it (None: the bus has no IMU)."""
 
     protocol: float = 2.0
     baud: int = 2_000_000
     control_hz: float = 125.0
+    imu: ImuSpec | None = None
 
 
 @dataclass
@@ -179,6 +195,24 @@ class _Reader:
         if len(value) != n or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
             raise self.fail(where, f"field {key!r} must be a list of {n} numbers, got {value!r}")
         return tuple(float(v) for v in value)
+
+
+def _parse_imu(r: _Reader, data) -> ImuSpec:
+    """``[bus.imu]``: ``id`` (0..252) and ``axes`` (a signed permutation of x, y, z)."""
+    if not isinstance(data, dict):
+        raise r.fail("bus.imu", "must be a table {id, axes}")
+    unknown = set(data) - {"id", "axes"}
+    if unknown:
+        raise r.fail("bus.imu", f"unknown field(s) {', '.join(sorted(unknown))}")
+    default = ImuSpec()
+    imu_id = r.get(data, "id", int, "bus.imu", default.id)
+    if not 0 <= imu_id <= 252:
+        raise r.fail("bus.imu", f"id {imu_id} outside 0..252")
+    axes = r.get(data, "axes", list, "bus.imu", list(default.axes))
+    if (len(axes) != 3 or not all(isinstance(a, str) and a.lstrip("-") in ("x", "y", "z") and a.count("-") <= 1
+                                  for a in axes) or sorted(a.lstrip("-") for a in axes) != ["x", "y", "z"]):
+        raise r.fail("bus.imu", f"axes must name each sensor axis once, e.g. [\"-x\", \"-y\", \"z\"], got {axes!r}")
+    return ImuSpec(id=imu_id, axes=tuple(axes))
 
 
 def parse_description(path: str | Path) -> RobotDescription:
@@ -261,6 +295,7 @@ def parse_description(path: str | Path) -> RobotDescription:
             protocol=r.get(b, "protocol", float, "bus"),
             baud=r.get(b, "baud", int, "bus"),
             control_hz=r.get(b, "control_hz", float, "bus"),
+            imu=_parse_imu(r, b["imu"]) if "imu" in b else None,
         )
         if bus.protocol not in (1.0, 2.0):
             raise r.fail("bus", f"protocol must be 1.0 or 2.0, got {bus.protocol}")
@@ -314,6 +349,8 @@ def parse_description(path: str | Path) -> RobotDescription:
         servos.append(spec)
     if servos and bus is None:
         raise r.fail("", "servos are listed but there is no [bus] table")
+    if bus is not None and bus.imu is not None and bus.imu.id in id_owner:
+        raise r.fail("bus.imu", f"id {bus.imu.id} is already used by [servos.{id_owner[bus.imu.id]}]")
 
     return RobotDescription(
         name=name,

@@ -41,6 +41,7 @@ from dynamixel_sdk import (
     COMM_NOT_AVAILABLE,
     COMM_RX_CORRUPT,
     COMM_SUCCESS,
+    GroupBulkRead,
     GroupSyncRead,
     GroupSyncWrite,
     PacketHandler,
@@ -158,6 +159,30 @@ class ServoBus(abc.ABC):
     def reset(self) -> None:
         """Recover the bus after an interrupted transfer (no-op where nothing can be stuck)."""
 
+    # ------------------------------------------------------------------ the torso IMU
+    #: bus ID of the IMU (the OpenCR at 200 on an OP3), None when this bus has none
+    imu_id: int | None = None
+    #: pre-flight may expect the IMU to read about 1 g (the robot at rest before torque is on)
+    imu_at_rest_in_preflight: bool = True
+
+    def ping_imu(self) -> int:
+        """Model number of the IMU device; :class:`ServoCommError` if it does not answer."""
+        if self.imu_id is None:
+            raise ServoCommError(None, "this bus has no IMU", self.port_name)
+        return self.ping(self.imu_id)
+
+    def read_imu(self) -> tuple[np.ndarray, np.ndarray]:
+        """(gyro [3] rad/s, accelerometer [3] m/s^2, specific force) in the robot's IMU frame."""
+        raise ServoCommError(None, "this bus has no IMU", self.port_name)
+
+    def read_present_positions_and_imu(self, ids: Sequence[int], *, allow_alert: bool = False
+                                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Present positions of ``ids`` and the IMU in one bus transaction where the bus can
+        (:class:`DynamixelBus`: one Bulk Read); returns ``(ticks [n], gyro [3], accel [3])``."""
+        present = self.read_present_positions(ids, allow_alert=allow_alert)
+        gyro, accel = self.read_imu()
+        return present, gyro, accel
+
     def __enter__(self):
         return self
 
@@ -232,6 +257,10 @@ class DynamixelBus(ServoBus):
             servos) when the servos answer it; falls back to Sync Read otherwise.
         latency_timer_ms: USB adapter latency used to size packet timeouts; by default read
             from sysfs, else the SDK's 16 ms.
+        imu: the torso IMU on this bus (:class:`~motok_robot.servo.imu.ImuMount`: the OpenCR
+            at ID 200 and its axis mapping), None when there is none.  Its registers are read
+            with the servos' present positions in one Bulk Read
+            (:meth:`read_present_positions_and_imu`).
     """
 
     def __init__(
@@ -242,8 +271,11 @@ class DynamixelBus(ServoBus):
         port_handler=None,
         fast_sync_read: bool = True,
         latency_timer_ms: float | None = None,
+        imu=None,
     ):
         self.port_name = port
+        self.imu = imu
+        self.imu_id = int(imu.id) if imu is not None else None
         self.baud = int(baud)
         self._success = COMM_SUCCESS
         self.packet_handler = PacketHandler(2.0)
@@ -268,6 +300,7 @@ class DynamixelBus(ServoBus):
         self._readers: dict[tuple[int, ...], object] = {}
         self._goal_writer = None
         self._goal_ids: tuple[int, ...] = ()
+        self._bulk_readers: dict[tuple[int, ...], object] = {}
 
     # ----------------------------------------------------------------------------- port
     def _open(self) -> None:
@@ -417,6 +450,60 @@ class DynamixelBus(ServoBus):
         return np.array([int.from_bytes(bytes(reader.data_dict[i][:4]), "little", signed=True) for i in ids],
                         dtype=np.int64)
 
+    # ------------------------------------------------------------------------------ IMU
+    def _imu_mount(self):
+        if self.imu is None:
+            raise ServoCommError(None, "this bus has no IMU (the robot description's [bus] has no imu)",
+                                 self.port_name)
+        return self.imu
+
+    def _check_imu_status(self, error: int, what: str) -> None:
+        if error & ct.STATUS_ALERT_BIT:
+            # the OpenCR has no X-series Hardware Error Status register to ask for the bits
+            raise ServoAlertError(self.imu_id, None, self.port_name)
+        if error:
+            name = ct.STATUS_ERRORS.get(error & 0x7F, f"error {error & 0x7F}")
+            raise ServoRejectedError(self.imu_id, f"{what}: device answered '{name}'", self.port_name)
+
+    def read_imu(self):
+        mount = self._imu_mount()
+        from motok_robot.servo import imu as imu_regs
+
+        data, result, error = self.packet_handler.readTxRx(self.port_handler, self.imu_id, imu_regs.IMU_BLOCK_ADDRESS,
+                                                           imu_regs.IMU_BLOCK_SIZE)
+        if result != self._success:
+            raise self._comm_error(self.imu_id, result, "read of the IMU registers")
+        self._check_imu_status(error, "read of the IMU registers")
+        return mount.decode(bytes(data))
+
+    def read_present_positions_and_imu(self, ids, *, allow_alert=False):
+        """One Bulk Read (instruction 0x92): Present Position (132, 4 bytes) of every servo in
+        ``ids`` and the IMU block (32, 12 bytes) of the IMU; each device answers in turn."""
+        mount = self._imu_mount()
+        from motok_robot.servo import imu as imu_regs
+
+        ids = tuple(int(i) for i in ids)
+        reader = self._bulk_readers.get(ids)
+        if reader is None:
+            reader = _StatusKeepingBulkRead(self.port_handler, self.packet_handler)
+            for servo_id in ids:
+                reader.addParam(servo_id, ct.ADDR_PRESENT_POSITION, ct.SIZE_PRESENT_POSITION)
+            reader.addParam(self.imu_id, imu_regs.IMU_BLOCK_ADDRESS, imu_regs.IMU_BLOCK_SIZE)
+            self._bulk_readers[ids] = reader
+        result = reader.txRxPacket()
+        what = "bulk read of present positions and the IMU"
+        if result != self._success:
+            raise self._comm_error(reader.failed_id, result, what)
+        for servo_id in ids:
+            error = reader.errors.get(servo_id, 0)
+            if error & ct.STATUS_ALERT_BIT and not allow_alert:
+                raise ServoAlertError(servo_id, self._try_read_hardware_error(servo_id), self.port_name)
+        self._check_imu_status(reader.errors.get(self.imu_id, 0), what)
+        present = np.array([int.from_bytes(bytes(reader.data_dict[i][0][:4]), "little", signed=True) for i in ids],
+                           dtype=np.int64)
+        gyro, accel = mount.decode(bytes(reader.data_dict[self.imu_id][0]))
+        return present, gyro, accel
+
     def reset(self) -> None:
         """Forget a transfer that an interrupt cut short (the SDK would report the port busy)."""
         self.port_handler.is_using = False
@@ -424,6 +511,31 @@ class DynamixelBus(ServoBus):
             self.port_handler.clearPort()
         except Exception:
             pass
+
+
+class _StatusKeepingBulkRead(GroupBulkRead):
+    """The SDK's GroupBulkRead, keeping each device's status error byte and the failing ID."""
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.errors: dict[int, int] = {}
+        self.failed_id: int | None = None
+
+    def rxPacket(self):  # noqa: N802 (SDK naming)
+        self.last_result = False
+        self.errors = {}
+        self.failed_id = None
+        if not self.data_dict:
+            return COMM_NOT_AVAILABLE
+        for device_id, entry in self.data_dict.items():
+            data, result, error = self.ph.readRx(self.port, device_id, entry[2])
+            if result != COMM_SUCCESS:
+                self.failed_id = device_id
+                return result
+            entry[0] = data
+            self.errors[device_id] = error
+        self.last_result = True
+        return COMM_SUCCESS
 
 
 class _StatusKeepingSyncRead(GroupSyncRead):

@@ -7,7 +7,12 @@ byte stuffing, CRC-16) from :mod:`motok_robot.servo.protocol`.
 
 What is emulated
   * per-ID control tables (X-series layout, model number e.g. XM430-W350 = 1020);
-  * PING (single and broadcast), READ, WRITE, SYNC WRITE, SYNC READ and FAST SYNC READ;
+  * PING (single and broadcast), READ, WRITE, SYNC WRITE, SYNC READ, FAST SYNC READ and
+    BULK READ (each listed device answers in turn with its own status packet);
+  * the torso IMU of the ROBOTIS OP3 (:class:`EmulatedOpenCR`, the OpenCR sub-controller at
+    ID 200): button, voltage, gyro and accelerometer registers (:mod:`motok_robot.servo.imu`)
+    that tests set (:meth:`EmulatedOpenCR.set_counts`, :meth:`EmulatedOpenCR.set_motion`);
+    the faults below apply to it as to a servo;
   * access rules: read-only registers, EEPROM writable only with torque off, Goal Position
     outside the Min/Max Position Limit registers rejected (data limit error);
   * Return Delay Time (address 9, 2 us per unit) delays each reply in real time;
@@ -189,6 +194,86 @@ class EmulatedServo:
         return (error & 0x7F) | (ct.STATUS_ALERT_BIT if self.hardware_error else 0)
 
 
+@dataclass
+class EmulatedOpenCR(EmulatedServo):
+    """The OpenCR sub-controller of a ROBOTIS OP3 at ``servo_id`` (200): the IMU registers of
+    :mod:`motok_robot.servo.imu`, read-only to the host.  At rest it reads 1 g up the sensor's z.
+
+    It has no position dynamics and no Hardware Error Status register: :attr:`alert_bits`
+    (set with :meth:`EmulatedServoChain.set_hardware_error`) raises the alert bit of its status
+    packets.  Values are set in register counts (:meth:`set_counts`) or in sensor-axis
+    physical units (:meth:`set_motion`: rad/s, m/s^2).
+    """
+
+    model: str = "OpenCR"
+    alert_bits: int = 0
+
+    def __post_init__(self) -> None:
+        from motok_robot.servo import imu
+
+        if not 0 <= self.servo_id <= 252:
+            raise ValueError(f"device ID {self.servo_id} outside 0..252")
+        self.poke(ct.ADDR_MODEL_NUMBER, 2, imu.OPENCR_MODEL_NUMBER)
+        self.poke(ct.ADDR_FIRMWARE_VERSION, 1, 6)
+        self.poke(ct.ADDR_ID, 1, self.servo_id)
+        self.poke(ct.ADDR_BAUD_RATE, 1, _BAUD_REGISTER[self.baud])
+        self.poke(ct.ADDR_RETURN_DELAY_TIME, 1, 0)
+        self.poke(imu.ADDR_PRESENT_VOLTAGE, 1, 120)
+        self.set_counts(gyro=(0, 0, 0), accel=(0, 0, int(round(1.0 / imu.G_PER_ACCEL_COUNT))))
+
+    @property
+    def hardware_error(self) -> int:
+        return self.alert_bits
+
+    def set_counts(self, gyro=None, accel=None, roll_pitch_yaw=None) -> None:
+        """Raw int16 register values (sensor axes x, y, z) of the gyro (2000/32800 deg/s per
+        count), the accelerometer (2/32768 g per count) and the roll/pitch/yaw estimate."""
+        from motok_robot.servo import imu
+
+        for address, values in ((imu.ADDR_GYRO, gyro), (imu.ADDR_ACCEL, accel),
+                                (imu.ADDR_ROLL_PITCH_YAW, roll_pitch_yaw)):
+            if values is None:
+                continue
+            for k, value in enumerate(values):
+                value = int(value)
+                if not -32768 <= value <= 32767:
+                    raise ValueError(f"IMU register {address + 2 * k}: {value} outside int16")
+                self.poke(address + 2 * k, 2, value)
+
+    def set_motion(self, gyro_rad_s=None, accel_m_s2=None) -> None:
+        """Gyro (rad/s) and specific force (m/s^2) along the sensor's own axes, as counts."""
+        from motok_robot.servo import imu
+
+        self.set_counts(gyro=None if gyro_rad_s is None else imu.gyro_counts(gyro_rad_s),
+                        accel=None if accel_m_s2 is None else imu.accel_counts(accel_m_s2))
+
+    def counts(self) -> tuple[list[int], list[int]]:
+        """(gyro, accelerometer) register counts as set."""
+        from motok_robot.servo import imu
+
+        return ([self.peek(imu.ADDR_GYRO + 2 * k, 2, signed=True) for k in range(3)],
+                [self.peek(imu.ADDR_ACCEL + 2 * k, 2, signed=True) for k in range(3)])
+
+    def advance(self, dt: float) -> None:
+        return  # no actuator
+
+    def write(self, address: int, data: bytes, now: float) -> int:
+        from motok_robot.servo import imu
+
+        size = len(data)
+        if size == 0 or address + size > ct.CONTROL_TABLE_SIZE:
+            return pr.ERROR_DATA_LENGTH
+        if address < imu.ADDR_ROLL_PITCH_YAW + 6 and imu.ADDR_BUTTON < address + size:
+            return pr.ERROR_ACCESS  # sensor registers are read-only
+        if address < ct.ADDR_ID + 1 and ct.ADDR_MODEL_NUMBER < address + size:
+            return pr.ERROR_ACCESS
+        self.table[address:address + size] = data
+        return 0
+
+    def touch(self, now: float) -> None:
+        self.last_instruction_time = now  # no bus watchdog
+
+
 class EmulatedServoChain(PortHandler):
     """A ``PortHandler`` whose wire is a chain of :class:`EmulatedServo` in memory.
 
@@ -260,9 +345,18 @@ class EmulatedServoChain(PortHandler):
         """Delay every reply of the servo by ``delay_s`` seconds (on top of its return delay)."""
         self._servo(servo_id).faults.reply_delay_s = float(delay_s)
 
+    @property
+    def imu(self) -> "EmulatedOpenCR | None":
+        """The emulated OpenCR (IMU) on this chain, or None."""
+        return next((s for s in self.servos.values() if isinstance(s, EmulatedOpenCR)), None)
+
     def set_hardware_error(self, servo_id: int, bits: int) -> None:
-        """Raise Hardware Error Status bits (e.g. 0x20 overload); torque switches off."""
+        """Raise Hardware Error Status bits (e.g. 0x20 overload); torque switches off.  On the
+        OpenCR: the alert bit of its status packets."""
         servo = self._servo(servo_id)
+        if isinstance(servo, EmulatedOpenCR):
+            servo.alert_bits = bits & 0xFF
+            return
         servo.table[ct.ADDR_HARDWARE_ERROR_STATUS] = bits & 0xFF
         if bits:
             servo.table[ct.ADDR_TORQUE_ENABLE] = ct.TORQUE_OFF
@@ -408,6 +502,8 @@ class EmulatedServoChain(PortHandler):
                 self._sync_write(params, clock_now)
             elif op in (pr.INST_SYNC_READ, pr.INST_FAST_SYNC_READ):
                 self._sync_read(params, now, clock_now, fast=op == pr.INST_FAST_SYNC_READ)
+            elif op == pr.INST_BULK_READ:
+                self._bulk_read(params, now, clock_now)
             elif op == pr.INST_WRITE and len(params) > 2:
                 for servo_id in self.servos:
                     servo = self._listening(servo_id)
@@ -497,12 +593,30 @@ class EmulatedServoChain(PortHandler):
         self._pending.append((ready, out))
 
 
+    def _bulk_read(self, params: bytes, now: float, clock_now: float) -> None:
+        # Protocol 2.0 Bulk Read: (ID, address, length) per device; each answers in list order
+        t = now
+        for k in range(len(params) // 5):
+            chunk = params[5 * k:5 * k + 5]
+            servo = self._listening(chunk[0])
+            if servo is None:
+                continue  # the host times out waiting for this one
+            address, size = chunk[1] | (chunk[2] << 8), chunk[3] | (chunk[4] << 8)
+            servo.touch(clock_now)
+            if address + size > ct.CONTROL_TABLE_SIZE:
+                t = self._send(servo, pr.ERROR_DATA_RANGE, b"", t)
+                continue
+            t = self._send(servo, 0, bytes(servo.table[address:address + size]), t)
+
+
 def emulated_chain(servo_map, *, baud: int = 2_000_000, positions: Sequence[float] | None = None,
-                   clock: Callable[[], float] = time.perf_counter, **kwargs) -> EmulatedServoChain:
+                   clock: Callable[[], float] = time.perf_counter, imu_id: int | None = None,
+                   **kwargs) -> EmulatedServoChain:
     """An emulated chain matching a :class:`~motok_robot.servo.convert.ServoMap`.
 
     Same IDs and models, Min/Max Position Limit registers = the map's tick limits, servos
     listening at ``baud``, starting at ``positions`` (ticks [n]; default: the zero pose).
+    With ``imu_id`` an :class:`EmulatedOpenCR` (the IMU) answers at that ID too.
     """
     start = servo_map.zero_ticks() if positions is None else positions
     servos = [
@@ -511,4 +625,6 @@ def emulated_chain(servo_map, *, baud: int = 2_000_000, positions: Sequence[floa
         for servo_id, model, p, lo, hi in zip(servo_map.ids, servo_map.models, start, servo_map.min_ticks,
                                                servo_map.max_ticks)
     ]
+    if imu_id is not None:
+        servos.append(EmulatedOpenCR(int(imu_id), baud=baud))
     return EmulatedServoChain(servos, clock=clock, **kwargs)

@@ -9,6 +9,11 @@ bus call, so with :class:`~motok_robot.servo.timing.RealClock` the robot moves i
 with :class:`~motok_robot.servo.timing.FakeClock` it moves in the streamer's time.  The robot
 starts free-standing at ``robot.nominal_qpos()``.
 
+The rig has the torso IMU too (:meth:`SimRig.read_imu`): gyro and accelerometer at the MJCF's
+``imu`` site (else the base body) from the MuJoCo state, computed by
+:func:`motok_robot.feasibility.physics.read_imu`, the function validation's closed-loop rollout
+reads its IMU with.  It answers at the ID of the description's ``[bus.imu]`` (200 when none).
+
 ``render_path`` (MP4/GIF): the state is sampled at ``render_fps`` while playing and the frames
 are drawn from the model's ``track`` camera when the rig is closed (rendering stays off the
 real-time path).
@@ -77,6 +82,11 @@ class SimRig(ServoBus):
         self.min_base_height = self.start_base_height
         self.fall_fraction = fall_fraction
         self.max_lag_s = max_lag_s
+        from motok_robot.feasibility.balance import imu_frame
+
+        self._imu = imu_frame(self.model, int(self.model.jnt_bodyid[0]))  # the free joint's body
+        spec = getattr(robot.bus, "imu", None) if robot.bus is not None else None
+        self.imu_id = int(spec.id) if spec is not None else 200
         self._t0 = self.clock.now()
         self.steps = 0
         self.render_path = Path(render_path) if render_path is not None else None
@@ -170,6 +180,21 @@ class SimRig(ServoBus):
 
     def set_return_delay_time(self, ids, units):
         self._check_ids(ids)
+
+    #: the simulated robot is released at its nominal pose and has not settled on the floor yet
+    imu_at_rest_in_preflight = False
+
+    def ping_imu(self) -> int:
+        if self.closed:
+            raise ServoCommError(self.imu_id, "the simulated rig is closed", self.port_name)
+        return 0
+
+    def read_imu(self):
+        """(gyro [3] rad/s, accelerometer [3] m/s^2) in the IMU frame, after stepping to the clock."""
+        from motok_robot.feasibility.physics import read_imu
+
+        self.advance()
+        return read_imu(self.model, self.data, self._imu)
 
     def close(self) -> None:
         if self.closed:
