@@ -49,7 +49,7 @@ def test_play_dry_run_streams_and_writes_log_and_stats(tmp_path, robot, capsys):
     assert "played 0.40 s" in out and "jitter p50" in out and "overruns" in out
     rows = read_log(log)
     assert len(rows["tick"]) == 25 + 51
-    assert np.all(rows["cmd_head_pan"] <= 3072) and np.all(rows["cmd_head_pan"] >= 1024)
+    assert np.all(rows["cmd_head_pan_ticks"] <= 3072) and np.all(rows["cmd_head_pan_ticks"] >= 1024)
     assert json.loads((tmp_path / "out" / "play.stats.json").read_text())["completed"] is True
 
 

@@ -65,8 +65,8 @@ def test_dry_run_every_decoded_goal_equals_the_expected_ticks(smap, tmp_path):
     rows = read_log(log)
     assert len(rows["tick"]) == result.ticks
     assert rows["phase"][0] == "ramp" and rows["phase"][-1] == "play"
-    assert rows[f"cmd_{smap.joints[0]}"][-1] == chain.servos[1].goal_history[-1]
-    assert not np.isnan(rows[f"present_{smap.joints[5]}"]).any()
+    assert rows[f"cmd_{smap.joints[0]}_ticks"][-1] == chain.servos[1].goal_history[-1]
+    assert not np.isnan(rows[f"present_{smap.joints[5]}_ticks"]).any()
     stats = json.loads((tmp_path / "play.stats.json").read_text())
     assert stats["completed"] is True and stats["stats"]["ticks"] == result.ticks
 
@@ -161,7 +161,7 @@ def test_fault_servo_disappears(smap, tmp_path):
     assert rows["phase"][-1] == "hold"
     for servo_id, servo in chain.servos.items():
         if servo_id != 12:
-            assert servo.goal_history[-1] == int(rows[f"cmd_{smap.joints[servo_id - 1]}"][-1])
+            assert servo.goal_history[-1] == int(rows[f"cmd_{smap.joints[servo_id - 1]}_ticks"][-1])
 
 
 def test_fault_no_reply_forever(smap, tmp_path):
@@ -345,6 +345,6 @@ def test_reading_every_fifth_tick_leaves_gaps_in_the_log_only(smap, tmp_path):
     streamer, chain, log = run(smap, traj, tmp_path, config=PlaybackConfig(rate_hz=RATE, ramp_s=0.5, read_every=5))
     result = streamer.play(traj)
     rows = read_log(log)
-    present = rows[f"present_{smap.joints[0]}"]
+    present = rows[f"present_{smap.joints[0]}_ticks"]
     assert np.isnan(present).sum() == result.ticks - len(range(0, result.ticks, 5))
     assert not np.isnan(present[::5]).any()

@@ -146,7 +146,7 @@ def test_forced_play_of_the_widened_setup_stays_in_the_installed_limits(tmp_path
     npz = knee_clip(tmp_path, robot, "op3_like")
     log = tmp_path / "play.csv"
     assert main(["play", str(npz), "--dry-run", "--force", "--ramp", "0.1", "--log", str(log)]) == 0
-    assert read_log(log)["cmd_l_knee"].max() <= 3613
+    assert read_log(log)["cmd_l_knee_ticks"].max() <= 3613
 
 
 # ---------------------------------------------------------------------------------- item 2

@@ -17,7 +17,7 @@ def register(commands, groups) -> None:
                                       "field of robot.npz names; a path there is refused)")
     play.add_argument("--port", help="serial device, e.g. /dev/ttyUSB0 (not needed with --dry-run / --sim)")
     play.add_argument("--baud", type=int, help="baud rate (default: the robot's bus, 2000000 for op3_like)")
-    play.add_argument("--rate", type=float, help="control rate in Hz (default: the robot's bus, 125)")
+    play.add_argument("--rate", type=float, help="control rate in Hz, 1..1000 (default: the robot's bus, 125)")
     mode = play.add_mutually_exclusive_group()
     mode.add_argument("--dry-run", action="store_true", help="play to an emulated servo chain (no hardware)")
     mode.add_argument("--sim", action="store_true", help="play on the MuJoCo model in real time (no hardware)")
@@ -28,6 +28,9 @@ def register(commands, groups) -> None:
     play.add_argument("--retries", type=int, default=None, help="consecutive failed ticks tolerated (3)")
     play.add_argument("--torque-off-on-stop", action="store_true",
                       help="on a fault or Ctrl-C switch torque off instead of holding position")
+    play.add_argument("--no-balance", action="store_true",
+                      help="play the validated servo goals open loop even when validation ran them closed loop "
+                           "(balance controller on the torso IMU); warns. Needed on a bus without an IMU")
     play.add_argument("--render", help="with --sim: record the simulated playback to this MP4/GIF")
     play.add_argument("--no-realtime", action="store_true",
                       help="do not ask for SCHED_FIFO priority for the control loop (by default it is requested; "
@@ -93,7 +96,14 @@ def _play_inner(args: argparse.Namespace) -> int:
     from motok_robot.servo.config import ON_STOP_HOLD, ON_STOP_TORQUE_OFF, PlaybackConfig
     from motok_robot.servo.convert import ServoMap
     from motok_robot.servo.emulator import emulated_chain
-    from motok_robot.servo.streamer import PlaybackInterrupted, Streamer, check_validation_report, load_trajectory
+    from motok_robot.servo.imu import ImuMount
+    from motok_robot.servo.streamer import (
+        PlaybackInterrupted,
+        Streamer,
+        check_validation_report,
+        load_trajectory,
+        robot_joint_ranges,
+    )
 
     path = Path(args.trajectory)
     if not path.is_file():
@@ -116,16 +126,26 @@ def _play_inner(args: argparse.Namespace) -> int:
     trajectory = load_trajectory(path, servo_map, robot.name, args.report, robot_sha256=digest)
     print("streaming the validated feedforward servo goals (servo_goals.npz)" if trajectory.goals == "feedforward"
           else "streaming the joint angles of the trajectory (no validated servo goals for this file)")
+    if trajectory.plan is not None:
+        print("validated closed loop: " + ("playing it OPEN LOOP (--no-balance)" if args.no_balance else
+                                           "the balance controller runs on the torso IMU"))
     bus_spec = robot.bus
     baud = args.baud or (bus_spec.baud if bus_spec else 2_000_000)
+    from motok_robot.servo import control_table as ct
+
+    if baud not in ct.BAUD_RATE_VALUES.values():
+        raise InputError(f"--baud {baud}: not a Dynamixel baud rate (one of "
+                         f"{', '.join(str(b) for b in ct.BAUD_RATE_VALUES.values())})")
     defaults = PlaybackConfig()
     config = PlaybackConfig(
-        rate_hz=args.rate or (bus_spec.control_hz if bus_spec else defaults.rate_hz),
+        rate_hz=args.rate if args.rate is not None else (bus_spec.control_hz if bus_spec else defaults.rate_hz),
         ramp_s=defaults.ramp_s if args.ramp is None else args.ramp,
         retry_budget=defaults.retry_budget if args.retries is None else args.retries,
         on_stop=ON_STOP_TORQUE_OFF if args.torque_off_on_stop else ON_STOP_HOLD,
         realtime_priority=0 if args.no_realtime else defaults.realtime_priority,
+        balance=not args.no_balance,
     )
+    imu = ImuMount.from_spec(bus_spec.imu) if bus_spec is not None and bus_spec.imu is not None else None
     log_path = Path(args.log) if args.log else path.with_name(path.stem + ".playback.csv")
     rig = None
     if args.sim:
@@ -133,16 +153,17 @@ def _play_inner(args: argparse.Namespace) -> int:
 
         bus = rig = SimRig(robot, render_path=args.render)
     elif args.dry_run:
-        bus = DynamixelBus(f"emulated:{robot.name}", baud, port_handler=emulated_chain(servo_map, baud=baud))
+        chain = emulated_chain(servo_map, baud=baud, imu_id=imu.id if imu is not None else None)
+        bus = DynamixelBus(f"emulated:{robot.name}", baud, port_handler=chain, imu=imu)
     else:
-        bus = DynamixelBus(args.port, baud)
+        bus = DynamixelBus(args.port, baud, imu=imu)
     try:
-        streamer = Streamer(bus, servo_map, config, log_path=log_path)
-        streamer.preflight()
+        streamer = Streamer(bus, servo_map, config, log_path=log_path, joint_range=robot_joint_ranges(robot))
+        streamer.preflight(trajectory)
         result = streamer.play(trajectory)
-    except PlaybackInterrupted as exc:
+    except PlaybackInterrupted as exc:  # Ctrl-C 130, SIGTERM 143, SIGHUP 129, after the safe stop
         print(f"motok-robot: {exc}", file=sys.stderr)
-        return 130
+        return exc.exit_status
     finally:
         bus.close()
     print(result.line())

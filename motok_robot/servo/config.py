@@ -29,6 +29,8 @@ class PlaybackConfig:
         realtime_priority: SCHED_FIFO priority for the real-time loop (Linux, root or
             CAP_SYS_NICE; warns and runs at normal priority when refused); 0 = off.  Only used
             with the real clock.
+        balance: run the balance controller of the validated servo goals (their
+            ``balance_*`` plan) on the torso IMU; False plays them open loop (``--no-balance``).
     """
 
     rate_hz: float = 125.0
@@ -43,12 +45,13 @@ class PlaybackConfig:
     check_models: bool = True
     spin_s: float = 0.0005
     realtime_priority: int = 50
+    balance: bool = True
 
     def __post_init__(self) -> None:
         from motok_robot.errors import InputError
 
-        if not 1.0 <= self.rate_hz <= 1000.0:
-            raise InputError(f"playback rate {self.rate_hz} Hz outside 1..1000 Hz")
+        if not (isinstance(self.rate_hz, (int, float)) and 1.0 <= self.rate_hz <= 1000.0):
+            raise InputError(f"playback rate (--rate) {self.rate_hz} Hz: must be a number in 1..1000 Hz")
         from motok_robot.limits import check_seconds
 
         check_seconds(self.ramp_s, "playback", "the ramp time (--ramp)")
