@@ -129,6 +129,9 @@ def load_source_motion(path, skeleton: str = "bandai", asf=None) -> SourceMotion
             if features.ndim != 2 or features.shape[1] != 263 or features.dtype.kind != "f":
                 raise InputError(f"{p}: field 'features' must be a float array [T, 263], got shape {features.shape} "
                                  f"({features.dtype})")
+            if not np.isfinite(features).all():
+                frame = int(np.argwhere(~np.isfinite(features))[0][0])
+                raise InputError(f"{p}: field 'features' is not finite (NaN or inf) at frame {frame}: fix the file")
             return SourceMotion(np.asarray(human.joints, np.float32), features.astype(np.float32), text, model)
         # at another frame rate the saved features (defined at 20 fps) do not apply: resample the
         # joints (the file's fps is honoured, as retarget honours it) and recompute them
@@ -326,7 +329,13 @@ def check_seed(seed, where: str = "seed") -> int:
         except ImportError:  # pragma: no cover
             pass
         raise InputError(f"{where} must be a non-negative integer, got {seed!r}")
+    if seed > MAX_SEED:
+        raise InputError(f"{where} {seed} is too large: seeds are 0..{MAX_SEED} (2**63 - 1)")
     return int(seed)
+
+
+#: the largest seed (torch and numpy take signed 64-bit seeds)
+MAX_SEED = 2**63 - 1
 
 
 def check_robot(robot) -> str:

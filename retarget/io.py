@@ -59,6 +59,13 @@ def read_motion_npz(path: str | Path) -> HumanMotion:
     if joints.ndim != 3 or joints.shape[1:] != (22, 3) or joints.shape[0] < 1 or joints.dtype.kind not in "fiu":
         raise InputError(f"{path}: field 'joints' must be a number array [T, 22, 3] (metres, z up), got shape "
                          f"{joints.shape} ({joints.dtype})")
+    bad = ~np.isfinite(joints)
+    if bad.any():
+        from motok_robot.motion.skeleton import JOINT_NAMES
+
+        frame, joint, _ = np.argwhere(bad)[0]
+        raise InputError(f"{path}: field 'joints' is not finite (NaN or inf) at frame {frame}, joint "
+                         f"{JOINT_NAMES[joint]}: fix the file")
     fps = scalar_field(data, "fps", path) if "fps" in data else 20.0
     check_rate(fps, str(path), "field 'fps'")
     check_frames(joints.shape[0], str(path), "field 'joints' frames")

@@ -122,12 +122,12 @@ class Constraints:
 
 def _frame_of(row: dict, where: str, fps: float) -> int:
     if row.get("frame") not in (None, ""):
-        value = float(row["frame"])
+        value = _number(row["frame"], where, "frame")
         if not math.isfinite(value) or value != int(value):
             raise InputError(f"{where}: 'frame' must be an integer, got {row['frame']!r}")
         return int(value)
     if row.get("time") not in (None, ""):
-        value = float(row["time"])
+        value = _number(row["time"], where, "time")
         if not math.isfinite(value):
             raise InputError(f"{where}: 'time' is not finite")
         return int(round(value * fps))
@@ -170,9 +170,14 @@ def add_trajectory(constraints: Constraints, path: str | Path, fps: float = FPS)
             constraints.set_joint(frame, 0, xyz, where=where)
         return constraints
     if path.suffix.lower() == ".npz":
-        with np.load(path) as data:
+        from motok_robot.npz_files import read_npz_fields
+
+        data = read_npz_fields(path, "trajectory file")
+        if True:  # (was a `with np.load(...)` block)
             if "root" not in data:
-                raise InputError(f"{path}: missing array 'root' [T, 2|3] (found {sorted(data.files)})")
+                raise InputError(f"{path}: missing array 'root' [T, 2|3] (found {sorted(data)})")
+            if data["root"].dtype.kind not in "fiu":
+                raise InputError(f"{path}: 'root' must be a number array [T, 2|3], got {data['root'].dtype}")
             root = np.asarray(data["root"], dtype=np.float64)
             if root.ndim != 2 or root.shape[1] not in (2, 3):
                 raise InputError(f"{path}: 'root' must have shape [T, 2] or [T, 3], got {root.shape}")
@@ -306,14 +311,16 @@ def _read_motion(path: str | Path, what: str) -> tuple[np.ndarray, np.ndarray]:
     path = Path(path)
     if not path.exists():
         raise InputError(f"{what} motion {path} does not exist")
-    try:
-        with np.load(path) as data:
-            missing = [k for k in ("joints", "features") if k not in data]
-            if missing:
-                raise InputError(f"{path}: missing {missing} (a motion.npz from `motok-robot generate`)")
-            joints, features = np.asarray(data["joints"], np.float64), np.asarray(data["features"], np.float64)
-    except (OSError, ValueError) as exc:
-        raise InputError(f"{what} motion {path}: cannot be read ({exc})") from None
+    from motok_robot.npz_files import read_npz_fields
+
+    data = read_npz_fields(path, f"{what} motion")
+    missing = [k for k in ("joints", "features") if k not in data]
+    if missing:
+        raise InputError(f"{path}: missing {missing} (a motion.npz from `motok-robot generate`)")
+    for key in ("joints", "features"):
+        if data[key].dtype.kind not in "fiu":
+            raise InputError(f"{path}: field '{key}' must be a number array, got {data[key].dtype}")
+    joints, features = np.asarray(data["joints"], np.float64), np.asarray(data["features"], np.float64)
     if joints.ndim != 3 or joints.shape[1:] != (22, 3) or features.ndim != 2 or features.shape[1] != 263:
         raise InputError(f"{path}: 'joints' must be [T, 22, 3] and 'features' [T, 263]; got {joints.shape}, {features.shape}")
     if len(joints) != len(features):

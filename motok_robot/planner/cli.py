@@ -134,6 +134,8 @@ def generate_command(args: argparse.Namespace, generate_one=None) -> int:
         raise InputError(f"--decoder-seed must be >= 0 (got {args.decoder_seed})")
     if args.seconds is not None and args.seconds <= 0:
         raise InputError(f"--seconds must be positive (got {args.seconds:g})")
+    if args.seed is not None and not 0 <= args.seed <= 2**63 - 1:  # checked before any model loads
+        raise InputError(f"--seed {args.seed} outside 0..{2**63 - 1} (torch and numpy take signed 64-bit seeds)")
     if args.seconds is not None:
         from motok_robot.limits import check_seconds
 
