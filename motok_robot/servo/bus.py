@@ -6,6 +6,8 @@ Three implementations exist:
 
 * :class:`DynamixelBus` (this module): ``dynamixel_sdk`` ``PortHandler`` + Protocol 2.0
   ``PacketHandler``, sync write of Goal Position and (fast) sync read of Present Position.
+  With ``imu`` (the OP3's OpenCR at ID 200, :mod:`motok_robot.servo.imu`) it also reads the
+  torso IMU, together with the present positions in one Bulk Read.
   Its ``port_handler`` argument is the seam: pass an
   :class:`~motok_robot.servo.emulator.EmulatedServoChain` and the real SDK builds and parses
   every packet against emulated servos.
