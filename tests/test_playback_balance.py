@@ -273,7 +273,8 @@ def test_torque_off_stop_writes_the_final_row(robot, smap, stand, tmp_path):
 
 
 # ----------------------------------------------------------------------------- validation -> play
-def test_validation_and_playback_run_the_same_controller_on_the_same_plan(robot, index, tmp_path, monkeypatch):
+def test_validation_and_playback_run_the_same_controller_on_the_same_plan(robot, index, tmp_path, monkeypatch,
+                                                                         capsys):
     from motok_robot.sim.feedforward import load_servo_goals
     from motok_robot.sim.validate import validate_file
     from motok_robot.servo.streamer import load_trajectory
@@ -311,6 +312,17 @@ def test_validation_and_playback_run_the_same_controller_on_the_same_plan(robot,
     import motok_robot.sim.rollout as rollout
 
     assert rollout.BalanceController is BalanceController
+    # and the command line: the dry run closes the loop on the emulated OpenCR at ID 200
+    from motok_robot.cli import main
+
+    used.clear()
+    rc = main(["play", str(path), "--dry-run", "--report", str(report), "--ramp", "0.2", "--no-realtime",
+               "--log", str(tmp_path / "play.csv")])
+    out = capsys.readouterr().out
+    assert rc == 0 and "the balance controller runs on the torso IMU" in out and "balance closed loop" in out
+    assert len(used) == 126
+    rows = read_log(tmp_path / "play.csv")
+    assert rows["accel_z_m_s2"][0] == pytest.approx(G, abs=1e-3) and not np.isnan(rows["balance_l_knee_rad"][-1])
 
 
 # ----------------------------------------------------------------------------- signals and --rate
@@ -332,12 +344,24 @@ def test_sigterm_and_sighup_during_a_dry_run_take_the_ctrl_c_path(robot, tmp_pat
     from motok_robot.cli import main
 
     clip = write_clip(tmp_path, robot)
-    timer = threading.Timer(0.8, os.kill, (os.getpid(), sig))
-    timer.start()
+    log = tmp_path / "robot.playback.csv"
+    done = threading.Event()
+
+    def send_when_playing():  # once the loop writes rows (its handlers are in place), as `kill` would
+        while not done.wait(0.01):
+            if log.is_file() and log.read_text().count("\n") > 12:
+                os.kill(os.getpid(), sig)
+                return
+
+    previous = signal.signal(sig, lambda *args: None)  # outside playback a stray signal is harmless
+    sender = threading.Thread(target=send_when_playing, daemon=True)
+    sender.start()
     try:
         rc = main(["play", str(clip), "--dry-run", "--ramp", "0.2", "--no-realtime", *extra])
     finally:
-        timer.cancel()
+        done.set()
+        sender.join()
+        restored = signal.signal(sig, previous)
     err = capsys.readouterr().err.strip()
     name = signal.Signals(sig).name
     assert rc == 128 + int(sig) and "\n" not in err
@@ -347,7 +371,8 @@ def test_sigterm_and_sighup_during_a_dry_run_take_the_ctrl_c_path(robot, tmp_pat
     assert rows["phase"][-1] == final and 10 < len(rows["tick"]) < 25 + 376
     stats = json.loads((tmp_path / "robot.playback.stats.json").read_text())
     assert stats["completed"] is False and name in stats["stopped_because"]
-    assert signal.getsignal(sig) is not None and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert restored is not None and restored.__name__ == "<lambda>"  # play restored the handler it found
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
 def test_a_second_signal_does_not_cut_the_safe_stop_short(robot, smap, tmp_path):
