@@ -2,6 +2,7 @@
 
 * :mod:`~motok_robot.servo.bus`: the :class:`ServoBus` seam and :class:`DynamixelBus`.
 * :mod:`~motok_robot.servo.emulator`: an emulated servo chain (an in-memory ``PortHandler``).
+* :mod:`~motok_robot.servo.imu`: the torso IMU on the bus (the OP3's OpenCR at ID 200).
 * :mod:`~motok_robot.servo.sim_rig`: the MuJoCo model as a servo bus.
 * :mod:`~motok_robot.servo.convert`: radians <-> ticks and the per-tick safety limiter.
 * :mod:`~motok_robot.servo.streamer`: report gate, pre-flight, fixed-rate streaming, safe stop.
@@ -20,6 +21,7 @@ _WHERE = {
     "ServoError": "bus",
     "ServoRejectedError": "bus",
     "PlaybackConfig": "config",
+    "ImuMount": "imu",
     "ServoMap": "convert",
     "limit_command": "convert",
     "PlaybackInterrupted": "streamer",
