@@ -20,6 +20,13 @@ Output: ``robot.npz`` exactly as in docs/CONTRACTS.md::
                                       trajectory plays (1.0 as retargeted; retarget.retime)
     collision_pairs str [n]           "geom1|geom2" pairs that came close and were kept apart
                                       by self-collision rows (retarget.collision; absent = none)
+
+Written by the feasibility stage (``motok_robot.feasibility``; absent in retargeting's output)::
+
+    reference_qpos  float64 [T, nq]   the kinematic trajectory the robot was asked to perform;
+                                      ``qpos`` is then what it executed in physics
+    initial_qvel    float64 [nv]      the velocity the executed rollout started from
+    feasibility     str (JSON)        what the stage changed (docs/feasibility.md)
 """
 
 from __future__ import annotations
@@ -142,8 +149,21 @@ def write_robot_npz(path: str | Path, result) -> Path:
         solver_status=np.array(json.dumps(status)),
         retime_factor=np.array(float(getattr(result, "retime_factor", 1.0))),
         collision_pairs=np.array(list(result.collision_pairs), dtype=str).reshape(-1),
+        **_feasibility_fields(result),
     )
     return path
+
+
+def _feasibility_fields(result) -> dict:
+    """The feasibility stage's optional fields of ``result`` (empty for a retargeting result)."""
+    out = {}
+    if getattr(result, "reference_qpos", None) is not None:
+        out["reference_qpos"] = np.asarray(result.reference_qpos, dtype=np.float64)
+    if getattr(result, "initial_qvel", None) is not None:
+        out["initial_qvel"] = np.asarray(result.initial_qvel, dtype=np.float64)
+    if getattr(result, "feasibility", None) is not None:
+        out["feasibility"] = np.array(json.dumps(result.feasibility))
+    return out
 
 
 @dataclass
@@ -161,6 +181,9 @@ class RobotTrajectory:
     solver_status: list[dict]
     retime_factor: float = 1.0
     collision_pairs: list[str] = field(default_factory=list)  # geom pairs retargeting kept apart
+    reference_qpos: np.ndarray | None = None  # [T, nq] the kinematic trajectory (feasibility output only)
+    initial_qvel: np.ndarray | None = None    # [nv] start velocity of the executed rollout
+    feasibility: dict | None = None           # what the feasibility stage changed
 
 
 ROBOT_NPZ_FIELDS = ("qpos", "joint_names", "robot", "fps", "contacts", "keypoint_error", "keypoint_names", "source", "solver_status")
@@ -189,6 +212,9 @@ def read_robot_npz(path: str | Path) -> RobotTrajectory:
                 solver_status=json.loads(str(d["solver_status"])),
                 retime_factor=float(d["retime_factor"]) if "retime_factor" in d.files else 1.0,
                 collision_pairs=[str(n) for n in d["collision_pairs"]] if "collision_pairs" in d.files else [],
+                reference_qpos=np.asarray(d["reference_qpos"], dtype=np.float64) if "reference_qpos" in d.files else None,
+                initial_qvel=np.asarray(d["initial_qvel"], dtype=np.float64) if "initial_qvel" in d.files else None,
+                feasibility=json.loads(str(d["feasibility"])) if "feasibility" in d.files else None,
             )
     except InputError:
         raise
@@ -197,4 +223,6 @@ def read_robot_npz(path: str | Path) -> RobotTrajectory:
     T = out.qpos.shape[0]
     if out.qpos.ndim != 2 or out.contacts.shape != (T, 2) or out.keypoint_error.shape[0] != T:
         raise InputError(f"{path}: inconsistent shapes qpos {out.qpos.shape}, contacts {out.contacts.shape}, keypoint_error {out.keypoint_error.shape}")
+    if out.reference_qpos is not None and out.reference_qpos.shape != out.qpos.shape:
+        raise InputError(f"{path}: field 'reference_qpos' has shape {out.reference_qpos.shape}, 'qpos' {out.qpos.shape}")
     return out

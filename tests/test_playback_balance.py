@@ -275,7 +275,7 @@ def test_torque_off_stop_writes_the_final_row(robot, smap, stand, tmp_path):
 # ----------------------------------------------------------------------------- validation -> play
 def test_validation_and_playback_run_the_same_controller_on_the_same_plan(robot, index, tmp_path, monkeypatch,
                                                                          capsys):
-    from motok_robot.sim.feedforward import load_servo_goals
+    from motok_robot.feasibility.feedforward import load_servo_goals
     from motok_robot.sim.validate import validate_file
     from motok_robot.servo.streamer import load_trajectory
 

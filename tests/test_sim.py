@@ -15,7 +15,7 @@ import pytest
 from motok_robot.errors import InputError
 from motok_robot.sim import synthetic as S
 from motok_robot.sim.config import ValidationConfig
-from motok_robot.sim.dynamics import finite_difference, moving_average, zmp_from_centroidal
+from motok_robot.feasibility.dynamics import finite_difference, moving_average, zmp_from_centroidal
 from motok_robot.sim.geometry import convex_hull, signed_distance
 from motok_robot.sim.kinematic import replay
 from motok_robot.robots.index import body_pairs_in_collision, index_robot

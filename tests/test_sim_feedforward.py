@@ -8,10 +8,11 @@ import json
 import numpy as np
 import pytest
 
+from motok_robot.feasibility import BalanceConfig
 from motok_robot.errors import InputError
 from motok_robot.sim import synthetic as S
 from motok_robot.sim.config import ValidationConfig
-from motok_robot.sim.feedforward import GOALS_FILE, feedforward_goals, goals_digest, load_servo_goals, servo_gains
+from motok_robot.feasibility.feedforward import GOALS_FILE, feedforward_goals, goals_digest, load_servo_goals, servo_gains
 from motok_robot.robots.index import index_robot
 from motok_robot.sim.rollout import servo_model, simulate
 from motok_robot.sim.testing import tiny_humanoid
@@ -75,8 +76,9 @@ def test_goals_clip_torque_and_respect_range_and_velocity(tiny):
 
 def test_feedforward_tracks_a_squat_better_than_reference_goals(tiny):
     qpos = S.squat(tiny, seconds=3.0, fps=FPS, depth=0.25)
-    kin_goals = _validate(tiny, qpos, physics=True)
-    plain = _validate(tiny, qpos, physics=True, config=ValidationConfig(servo_feedforward=False))
+    open_loop = BalanceConfig(enabled=False)  # the feedforward's own effect, without the balance controller
+    kin_goals = _validate(tiny, qpos, physics=True, balance=open_loop)
+    plain = _validate(tiny, qpos, physics=True, config=ValidationConfig(servo_feedforward=False), balance=open_loop)
     assert kin_goals.report["servo_goals"]["mode"] == "feedforward"
     assert plain.report["servo_goals"]["mode"] == "reference"
     assert np.allclose(plain.goals, qpos[:, tiny.qpos_adr])

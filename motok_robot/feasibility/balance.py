@@ -19,8 +19,9 @@ joints by ``q`` about its world axis ``a`` turns the body above by ``-q a``; so 
     goal_j += s_j(t) (kp_role(j) a_j . e + kd_role(j) a_j . (w_f - w_ref))
 
 turns the torso back toward its reference attitude (the ankle strategy when the ankles carry
-it, the hip strategy with the hips), ``a_j`` with its vertical part removed (no yaw
-correction), ``s_j`` = 1 while the leg's foot is in contact in the reference and
+it, the hip strategy with the hips), ``a_j`` with its vertical part removed, except for the hip
+yaw joints, which keep only their vertical part (yaw damping: the tilt error has no yaw part,
+and the IMU cannot observe heading), ``s_j`` = 1 while the leg's foot is in contact in the reference and
 ``swing_share`` otherwise.  Everything that depends on the reference (attitude, rate, axes,
 support) is precomputed per frame into a :class:`BalancePlan`; at run time the controller is a
 time-varying linear feedback plus the filter, cheap enough for a Python loop at 125 Hz and
@@ -130,6 +131,9 @@ def leg_roles(index) -> tuple[np.ndarray, np.ndarray]:
                     continue
                 axis = np.abs(data.xaxis[jid])
                 kind = int(np.argmax(axis))  # 0: roll (x), 1: pitch (y), 2: yaw (z)
+                if kind == 2:
+                    role[joint_of[jid]] = ROLES.index("hip_yaw")
+                    side[joint_of[jid]] = leg
                 (roll if kind == 0 else pitch if kind == 1 else []).append(joint_of[jid])
             b = int(model.body_parentid[b])
         for k, j in enumerate(pitch):  # pitch joints from the sole upward
@@ -187,9 +191,12 @@ def build_plan(index, qpos: np.ndarray, fps: float, contacts: np.ndarray,
     kp = np.array([config.tilt_gain.get(r, 0.0) for r in ROLES] + [0.0])[role]
     kd = np.array([config.rate_gain.get(r, 0.0) for r in ROLES] + [0.0])[role]
     s = np.where(side[None, :] >= 0, weight[:, np.maximum(side, 0)], 0.0)  # [T, nj]
-    horizontal = axes.copy()
-    horizontal[:, :, 2] = 0.0
-    in_imu = np.einsum("tkn,tjk->tjn", rot, horizontal)  # R^T a_j per joint: [T, nj, 3]
+    # tilt acts through each joint's horizontal axis part, yaw through a hip yaw's vertical part
+    used = axes.copy()
+    yaw = role == ROLES.index("hip_yaw")
+    used[:, ~yaw, 2] = 0.0
+    used[:, yaw, :2] = 0.0
+    in_imu = np.einsum("tkn,tjk->tjn", rot, used)  # R^T a_j per joint: [T, nj, 3]
     tilt_matrix = (s * kp)[:, :, None] * in_imu
     rate_matrix = (s * kd)[:, :, None] * in_imu
     return BalancePlan(fps=float(fps), down=down, rate=rate, tilt_matrix=tilt_matrix, rate_matrix=rate_matrix,

@@ -14,21 +14,24 @@ from motok_robot.errors import InputError
 
 #: the leg joints the balance controller moves, by role (inferred from the kinematic chain
 #: from each sole up to the base: the first pitch joint is the ankle, the last the hip, pitch
-#: joints between them are knees; the first roll joint is the ankle's, the last the hip's)
-ROLES = ("ankle_pitch", "ankle_roll", "knee", "hip_pitch", "hip_roll")
+#: joints between them are knees; the first roll joint is the ankle's, the last the hip's; a
+#: joint turning about the vertical is a hip yaw, which acts on the torso's yaw only)
+ROLES = ("ankle_pitch", "ankle_roll", "knee", "hip_pitch", "hip_roll", "hip_yaw")
 
 
 def _default_tilt_gain() -> dict:
-    # ankle strategy first, the hip helping: an ankle goal offset of 0.6 rad per rad of torso
-    # tilt on a 21 N m/rad servo gives 12.6 N m/rad, above the 7.8 N m/rad gravity toppling
-    # stiffness of a 3.2 kg robot with its CoM 0.25 m above the ankles
-    return {"ankle_pitch": 0.6, "ankle_roll": 0.5, "knee": 0.0, "hip_pitch": 0.3, "hip_roll": 0.3}
+    # no attitude (P) feedback by default: on op3_like every tilt gain tried (ankle +-1 and 2,
+    # hip +-1 rad/rad) lowered the push a standing robot survives, with or without gyro damping
+    # (docs/feasibility.md, "Gains"); the accelerometer-corrected estimate stays for users who set one
+    return {"ankle_pitch": 0.0, "ankle_roll": 0.0, "knee": 0.0, "hip_pitch": 0.0, "hip_roll": 0.0, "hip_yaw": 0.0}
 
 
 def _default_rate_gain() -> dict:
-    # gyro damping (s): the ROBOTIS OP3 walk's gyro feedback (0.05 x gains 0.9 / 0.7 / 0.3 / 0.35
-    # on ankle pitch / ankle roll / knee / hip roll), with the hip pitch given the hip roll's
-    return {"ankle_pitch": 0.045, "ankle_roll": 0.035, "knee": 0.015, "hip_pitch": 0.0175, "hip_roll": 0.0175}
+    # gyro damping on the stance ankles (s), as the ROBOTIS OP3 walk's gyro feedback; 0.1 s on
+    # op3_like raised the backward push a standing robot survives from 11 to 13 N (0.1 s push)
+    # and kept a ZMP-shifted slow Bandai walk up for its 17.9 s (it fell at 5.0 s open loop);
+    # hip and knee damping did not help there
+    return {"ankle_pitch": 0.1, "ankle_roll": 0.1, "knee": 0.0, "hip_pitch": 0.0, "hip_roll": 0.0, "hip_yaw": 0.0}
 
 
 @dataclass(frozen=True)
@@ -129,6 +132,42 @@ class RefineConfig:
                 raise InputError(f"refine {name} = {value}: must lie in [{low}, {high}]")
         if self.joints not in ("legs", "all"):
             raise InputError(f"refine joints = {self.joints!r}: use legs or all")
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class FeasibilityConfig:
+    """The whole stage (:mod:`motok_robot.feasibility.stage`)."""
+
+    #: play the motion this many times slower (1 = human timing); recorded as the time warp
+    retime: float = 1.0
+    #: move the CoM so the cart-table ZMP stays on the planned feet (:mod:`.zmp_shift`)
+    zmp_shift: bool = True
+    #: how far inside the support polygon the shifted ZMP is kept (m)
+    zmp_margin_m: float = 0.01
+    #: "lateral": the CoM only moves across the walking direction; "both": also along it
+    zmp_axes: str = "lateral"
+    #: run the predictive-sampling refinement of the goals (:mod:`.refine`)
+    refine: bool = False
+    #: physics timestep (s): the validation rollout's (ValidationConfig.physics_timestep_s)
+    timestep_s: float = 0.004
+    #: servo goals change by at most this fraction of the velocity limit per frame
+    goal_velocity_fraction: float = 0.95
+    #: contact height (m) and friction of the inverse dynamics behind the feedforward goals
+    contact_height_m: float = 0.005
+    friction: float = 0.8
+    balance: BalanceConfig = field(default_factory=BalanceConfig)
+    refine_config: RefineConfig = field(default_factory=RefineConfig)
+
+    def __post_init__(self):
+        if not 1.0 <= float(self.retime) <= 4.0:
+            raise InputError(f"feasibility retime = {self.retime}: must lie in [1, 4] (times slower)")
+        if self.zmp_axes not in ("lateral", "both"):
+            raise InputError(f"feasibility zmp_axes = {self.zmp_axes!r}: use lateral or both")
+        if not 0.0 <= float(self.zmp_margin_m) <= 0.05:
+            raise InputError(f"feasibility zmp_margin_m = {self.zmp_margin_m}: must lie in [0, 0.05] m")
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)

@@ -161,3 +161,28 @@ def zmp_from_centroidal(com: np.ndarray, com_acc: np.ndarray, angmom_rate: np.nd
     zmp[ok, 0] = com[ok, 0] - (com[ok, 2] * force[ok, 0] + rate[ok, 1]) / fz
     zmp[ok, 1] = com[ok, 1] - (com[ok, 2] * force[ok, 1] - rate[ok, 0]) / fz
     return zmp
+
+
+def required_torque(index, qpos: np.ndarray, fps: float, contact_height_m: float = 0.005,
+                    friction: float = 0.8) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Joint angles, velocities and required torques [T, nj] of ``qpos`` [T, nq] at ``fps``:
+    ``mj_inverse`` without constraints, the ground reaction distributed over the sole corners
+    lower than ``contact_height_m`` (:class:`ContactDistributor`).  Validation's kinematic replay
+    measures the same torques with everything else it checks."""
+    model = index.kin_model
+    data = mujoco.MjData(model)
+    qvel, qacc = qvel_qacc(model, qpos, fps)
+    distributor = ContactDistributor(model, index.base_dof, friction)
+    corner_bodies = index.sole_body[:, None].repeat(4, axis=1)
+    torque = np.zeros((qpos.shape[0], index.nj))
+    for t in range(qpos.shape[0]):
+        data.qpos[:] = qpos[t]
+        data.qvel[:] = qvel[t]
+        data.qacc[:] = qacc[t]
+        mujoco.mj_inverse(model, data)
+        corners = data.site_xpos[index.corner_sites]
+        down = corners[:, :, 2].min(axis=1) < contact_height_m
+        qfrc_contact, _, _ = distributor.solve(data, data.qfrc_inverse, corners[down].reshape(-1, 3),
+                                               corner_bodies[down].reshape(-1))
+        torque[t] = (data.qfrc_inverse - qfrc_contact)[index.dof_adr]
+    return qpos[:, index.qpos_adr], qvel[:, index.dof_adr], torque

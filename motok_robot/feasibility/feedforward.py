@@ -14,7 +14,7 @@ Feedforward moves each goal by the torque the motion needs:
     goal = q_ref + (tau_ref + k_d qdot_ref) / k
 
 where ``tau_ref`` is the required joint torque of the validator's inverse dynamics
-(:mod:`motok_robot.sim.dynamics`: ``mj_inverse`` with the ground reaction distributed over
+(:mod:`motok_robot.feasibility.dynamics`: ``mj_inverse`` with the ground reaction distributed over
 the soles in contact; it includes the joints' passive damping and armature) clipped to the
 actuator's force limit.  The goals are then clamped to the joint range and rate-limited to
 a fraction of the servo velocity limit per frame (``ValidationConfig.servo_goal_velocity_fraction``,
@@ -31,7 +31,8 @@ whose real stiffness differs from the robot description gets a proportionally wr
     joint_names   str [nj]
     fps           float
     robot         str
-    mode          str              "feedforward" (or "reference": goals = the joint angles)
+    mode          str              "feedforward" (or "reference": goals = the joint angles;
+                                   "feasibility": refined by the feasibility stage)
     source_sha256 str              sha256 of the robot.npz the goals were computed from
     balance_*                      the balance controller's plan when validation ran closed loop
                                    (:class:`motok_robot.feasibility.balance.BalancePlan`)
@@ -48,12 +49,12 @@ from motok_robot.errors import InputError
 from motok_robot.npz_files import read_npz_fields
 
 GOALS_FILE = "servo_goals.npz"
-MODES = ("feedforward", "reference")
+MODES = ("feedforward", "reference", "feasibility")
 
 
 def servo_gains(model, index) -> tuple[np.ndarray, np.ndarray]:
     """Effective stiffness ``k`` (N m/rad) and damping ``k_d`` (N m s/rad) per joint [nj] of the
-    servo model the rollout uses (``model`` from :func:`motok_robot.sim.rollout.servo_model`).
+    servo model the rollout uses (``model`` from :func:`motok_robot.feasibility.physics.servo_model`).
 
     For an actuator with gear ``g``, control ``g x goal`` and an affine bias, the joint torque
     is ``g^2 (gain ctrl/g + bias1 q + bias2 qdot)``, so ``k = g^2 gain`` and ``k_d = -g^2 bias2``.

@@ -121,10 +121,11 @@ class ServoPhysics:
 
     def tick_goals(self, goals: np.ndarray, fps: float, tick0: int, nticks: int) -> np.ndarray:
         """Goals [B, nticks, nj] of ticks ``tick0 .. tick0 + nticks - 1`` from goal frames
-        ``goals`` [B, T, nj] at ``fps``: linear between frames at each tick's end time."""
+        ``goals`` [B, T, nj] at ``fps``: linear between frames at each tick's start time, as
+        playback sends them (:mod:`motok_robot.servo.streamer`)."""
         T = goals.shape[1]
-        tick_end = (tick0 + np.arange(nticks) + 1) * self.tick_s
-        x = np.clip(tick_end * fps, 0, T - 1)
+        tick_start = (tick0 + np.arange(nticks)) * self.tick_s
+        x = np.clip(tick_start * fps, 0, T - 1)
         i0 = np.floor(x).astype(int)
         i1 = np.minimum(i0 + 1, T - 1)
         f = (x - i0)[None, :, None]
@@ -183,3 +184,25 @@ class ServoPhysics:
         commands = self.advance(datas, goals, fps, 0, nticks, controller, states=states, perturb=perturb)
         return {"states": states, "step_time": (np.arange(nstep) + 1) * self.dt, "commands": commands,
                 "wall_s": time.perf_counter() - start}
+
+
+def execute(index, qpos0: np.ndarray, goals: np.ndarray, fps: float, plan: BalancePlan | None,
+            timestep_s: float = 0.004, initial_qvel: np.ndarray | None = None) -> tuple[np.ndarray, bool]:
+    """The rollout of ``goals`` [T, nj] from ``qpos0`` (at rest unless ``initial_qvel``) with the
+    plan's controller: qpos [T, nq] at the frame times, and whether the torso tilted past 1 rad."""
+    physics = ServoPhysics(index, timestep_s=timestep_s, rate_hz=plan.config.rate_hz if plan else 125.0)
+    T = goals.shape[0]
+    qvel0 = np.zeros(index.model.nv) if initial_qvel is None else initial_qvel
+    initial = physics.initial_state(qpos0, qvel0, goals[0])
+    nticks = max(1, int(round((T - 1) / fps / physics.tick_s)))
+    datas = physics.new_datas(initial[None])
+    states = np.zeros((1, nticks * physics.steps_per_tick, physics.nstate))
+    controller = BalanceController(plan, index.joint_range) if plan is not None else None
+    physics.advance(datas, goals[None], fps, 0, nticks, controller, states=states)
+    nq = physics.model.nq
+    all_qpos = np.vstack([initial[None, 1:1 + nq], states[0, :, 1:1 + nq]])
+    step = np.clip(np.round(np.arange(T) / fps / physics.dt).astype(int), 0, all_qpos.shape[0] - 1)
+    qpos = all_qpos[step]
+    quat = qpos[:, 3:7] / np.linalg.norm(qpos[:, 3:7], axis=1, keepdims=True)
+    up_z = 1 - 2 * (quat[:, 1] ** 2 + quat[:, 2] ** 2)
+    return qpos, bool((up_z < np.cos(1.0)).any())

@@ -7,7 +7,7 @@ site / body / actuator ids used by the checks, plus three model copies:
 
 * ``kin_model``: the robot with every constraint disabled (``mjDSBL_CONSTRAINT``), used for
   kinematic replay and for inverse dynamics *without* contacts (the ground reaction is then
-  distributed over the soles by :mod:`motok_robot.sim.dynamics`);
+  distributed over the soles by :mod:`motok_robot.feasibility.dynamics`);
 * ``collision_model``: the robot with all its collision-capable geoms made to collide with
   each other and the floor removed, used to find self-collisions;
 * the robot's own ``model`` (untouched) for the physics rollout.

@@ -7,7 +7,7 @@ Sequence (:func:`play_file`):
    warns (:class:`PlaybackWarning`).
 2. **Load** (:func:`load_trajectory`): the servo goals the report validated
    (``servo_goals.npz``: the joint angles plus inverse-dynamics feedforward, see
-   :mod:`motok_robot.sim.feedforward`), or the joint columns of ``qpos`` when the report
+   :mod:`motok_robot.feasibility.feedforward`), or the joint columns of ``qpos`` when the report
    records none; servo-map order.
 3. **Pre-flight** (:meth:`Streamer.preflight`): ping every ID, check model numbers and
    Hardware Error Status, set Return Delay Time, read present positions (each must lie in its
@@ -246,7 +246,7 @@ def _validated_goals(path: Path, report_path: Path, robot_sha256: str | None = N
     readable report, it validated other content or (with ``robot_sha256``) another robot
     description (the report gate deals with those), or it records no goals file.  A recorded
     file that is missing or altered is an InputError."""
-    from motok_robot.sim.feedforward import load_servo_goals
+    from motok_robot.feasibility.feedforward import load_servo_goals
 
     try:
         report = json.loads(report_path.read_text(encoding="utf-8"))

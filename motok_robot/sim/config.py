@@ -1,7 +1,7 @@
 """Every threshold of the validation stage, in one place.
 
 :class:`ValidationConfig` holds the thresholds and model choices used by
-:mod:`motok_robot.sim.kinematic`, :mod:`motok_robot.sim.dynamics`,
+:mod:`motok_robot.sim.kinematic`, :mod:`motok_robot.feasibility.dynamics`,
 :mod:`motok_robot.sim.rollout` and the verdict in :mod:`motok_robot.sim.report`.
 Each field's comment says what it measures, its unit and why its default is what it is.
 From the command line any field can be changed with ``--set key=value`` (repeatable);
@@ -70,7 +70,7 @@ class ValidationConfig:
     #: fail when |required torque| / actuator force limit exceeds this anywhere.
     max_torque_ratio: float = 1.0
     #: friction coefficient of the feet used to distribute the ground reaction in inverse
-    #: dynamics (the linearised cone of :mod:`motok_robot.sim.dynamics`).
+    #: dynamics (the linearised cone of :mod:`motok_robot.feasibility.dynamics`).
     friction_coefficient: float = 0.8
 
     # ---- balance -----------------------------------------------------------------------
@@ -103,6 +103,14 @@ class ValidationConfig:
     #: fail when the root body ends farther than this (horizontally) from the reference (m)
     #: per metre of robot height -- the threshold scales with robot size.
     max_base_drift_per_height: float = 0.25
+    #: fidelity (motok_robot.sim.fidelity): fail when the mean distance of the robot's bodies from
+    #: their reference positions, each relative to its root's heading frame, exceeds this
+    #: fraction of the robot's height (0.05: 2.6 cm on op3_like, about the retargeting's own
+    #: keypoint error of real walks, 1.6-1.8 cm, plus servo compliance)
+    max_pose_error_per_height: float = 0.05
+    #: fidelity: fail when the root heading differs from the reference's by more than this (rad;
+    #: 0.5 rad = 29 degrees, a turn of the robot the motion did not ask for)
+    max_heading_error_rad: float = 0.5
     #: centre of pressure sampling rate in the rollout (Hz); contact forces are read there.
     #: 20 Hz = the frame rate of the trajectories.
     cop_rate_hz: float = 20.0
@@ -117,7 +125,7 @@ class ValidationConfig:
     #: servo goals of the rollout (and of playback, which streams the validated goals):
     #: True = inverse-dynamics feedforward, goal = reference + (required torque + servo
     #: damping x velocity) / servo stiffness, clamped to the joint range and velocity limit
-    #: (:mod:`motok_robot.sim.feedforward`); False = the reference joint angles themselves.
+    #: (:mod:`motok_robot.feasibility.feedforward`); False = the reference joint angles themselves.
     #: A position servo only pushes once it lags, so plain reference goals make a compliant
     #: servo robot sag and trail (walks fall open loop; docs/validation.md).
     servo_feedforward: bool = True

@@ -9,7 +9,7 @@
 * self-collision between non-adjacent bodies (``motok_robot.robots.index.body_pairs_in_collision``);
 * joints: position, velocity, acceleration (finite differences) against limits;
 * required joint torques from inverse dynamics with the ground reaction distributed over
-  the sole corners in contact (:mod:`motok_robot.sim.dynamics`);
+  the sole corners in contact (:mod:`motok_robot.feasibility.dynamics`);
 * balance: centre of mass, support polygon (convex hull of the corners in contact), signed
   CoM margin, ZMP and its margin.
 
@@ -25,7 +25,7 @@ import mujoco
 import numpy as np
 
 from motok_robot.sim.config import ValidationConfig
-from motok_robot.sim.dynamics import (ContactDistributor, finite_difference, moving_average, qvel_qacc,
+from motok_robot.feasibility.dynamics import (ContactDistributor, finite_difference, moving_average, qvel_qacc,
                                       zmp_from_centroidal)
 from motok_robot.sim.geometry import convex_hull, signed_distance
 from motok_robot.robots.index import RobotIndex, body_pairs_in_collision

@@ -128,9 +128,12 @@ def _frames(mask: np.ndarray) -> list[int]:
 
 
 def build_checks(index: RobotIndex, kin: KinematicResult, roll: RolloutResult | None,
-                 config: ValidationConfig, planned_contacts: np.ndarray | None = None
-                 ) -> tuple[list[Check], dict, dict, dict]:
+                 config: ValidationConfig, planned_contacts: np.ndarray | None = None,
+                 fidelity: dict | None = None) -> tuple[list[Check], dict, dict, dict]:
     """All checks, the metrics dict, the per-foot and the per-joint summaries.
+
+    ``fidelity`` (:func:`motok_robot.sim.fidelity.fidelity_measures` of the rollout) adds the
+    ``fidelity_pose`` and ``fidelity_heading`` checks.
 
     ``planned_contacts`` (bool [T, 2], the ``contacts`` field of robot.npz) only adds a
     diagnosis to the skating details: skating inside planned contact phases (the foot slides)
@@ -276,6 +279,17 @@ def build_checks(index: RobotIndex, kin: KinematicResult, roll: RolloutResult | 
                               "samples": int(cop_valid.sum())}))
         metrics.update(fell=roll.fell, fall_time_s=roll.fall_time_s, tracking_rmse_rad=roll.tracking_rmse,
                        base_drift_m=drift, cop_outside_ratio=cop_ratio)
+        if fidelity is not None:
+            pose_limit = c.max_pose_error_per_height * index.height_m
+            checks.append(_upper("fidelity_pose", fidelity["pose_error_mean_m"], pose_limit, "m",
+                                 f"mean distance of the rollout's bodies from the reference's, each relative to its root's "
+                                 f"heading frame (threshold {c.max_pose_error_per_height} x robot height)",
+                                 _frames(valid & (fidelity["pose_error_m"] > pose_limit))))
+            checks.append(_upper("fidelity_heading", fidelity["heading_error_max_rad"], c.max_heading_error_rad, "rad",
+                                 "largest root heading difference between the rollout and the reference",
+                                 _frames(valid & (fidelity["heading_error_rad"] > c.max_heading_error_rad))))
+            metrics.update(pose_error_mean_m=fidelity["pose_error_mean_m"],
+                           heading_error_max_rad=fidelity["heading_error_max_rad"])
 
     metrics["passed"] = all(ch.passed for ch in checks)
 

@@ -6,7 +6,7 @@ actuators receive the servo goals linearly interpolated from the clip's frame
 rate to the physics timestep (each step gets the target of the step's end time).
 
 Servo goals: the reference joint angles, or the feedforward goals of
-:mod:`motok_robot.sim.feedforward` (validation's default, which playback then streams).
+:mod:`motok_robot.feasibility.feedforward` (validation's default, which playback then streams).
 
 Servo model: the robot's own actuators.  Position actuators (affine bias with a negative
 position gain: MuJoCo ``<position>``) get the target angle as control (times the
@@ -41,7 +41,7 @@ from motok_robot.feasibility.balance import BalanceController, BalancePlan
 from motok_robot.feasibility.physics import ServoPhysics
 from motok_robot.feasibility.physics import servo_model as physics_servo_model
 from motok_robot.sim.config import ValidationConfig
-from motok_robot.sim.dynamics import finite_difference_qvel
+from motok_robot.feasibility.dynamics import finite_difference_qvel
 from motok_robot.sim.geometry import convex_hull, signed_distance
 from motok_robot.robots.index import RobotIndex
 
@@ -85,14 +85,19 @@ def _up_axis(quat: np.ndarray) -> np.ndarray:
 
 
 def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: ValidationConfig,
-             goals: np.ndarray | None = None, plan: BalancePlan | None = None) -> RolloutResult:
+             goals: np.ndarray | None = None, plan: BalancePlan | None = None,
+             initial_qvel: np.ndarray | None = None, judge_qpos: np.ndarray | None = None) -> RolloutResult:
     """Roll the robot out in physics tracking ``qpos`` [T, nq] (frames at ``fps``).
 
     ``goals`` [T, nj] (rad, robot joint order) are the servo goals when they differ from the
-    reference joint angles (feedforward, :mod:`motok_robot.sim.feedforward`); tracking error,
+    reference joint angles (feedforward, :mod:`motok_robot.feasibility.feedforward`); tracking error,
     drift and falls are always measured against ``qpos``.  With a balance ``plan`` the robot runs
     closed loop: the balance controller corrects the goals at its rate from the simulated IMU
-    (:mod:`motok_robot.feasibility.physics`), goals held over each controller tick."""
+    (:mod:`motok_robot.feasibility.physics`), goals held over each controller tick.
+
+    The robot starts at ``qpos[0]`` with ``initial_qvel`` (default: the finite-difference velocity
+    of ``qpos``).  Falls, tracking and drift are judged against ``judge_qpos`` when given (the
+    kinematic reference of an executed trajectory), else against ``qpos``."""
     import time as _time
 
     start = _time.perf_counter()
@@ -106,6 +111,9 @@ def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: Validation
 
     goal_frames = qpos[:, index.qpos_adr] if goals is None else np.asarray(goals, dtype=np.float64)
     qvel_ref = finite_difference_qvel(model, qpos[: min(T, 3)], fps)
+    if initial_qvel is not None:
+        qvel_ref[0] = initial_qvel
+    judge = qpos if judge_qpos is None else np.asarray(judge_qpos, dtype=np.float64)
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     data = mujoco.MjData(model)
     if plan is None:
@@ -139,8 +147,8 @@ def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: Validation
     all_qpos = states[:, 1:1 + model.nq]
 
     # per-step fall detection against the reference interpolated at each step's end
-    ref_z = np.interp(step_end, ref_time, qpos[:, 2])
-    ref_quat = np.stack([np.interp(step_end, ref_time, qpos[:, 3 + i]) for i in range(4)], axis=1)
+    ref_z = np.interp(step_end, ref_time, judge[:, 2])
+    ref_quat = np.stack([np.interp(step_end, ref_time, judge[:, 3 + i]) for i in range(4)], axis=1)
     ref_quat /= np.linalg.norm(ref_quat, axis=1, keepdims=True)
     up_sim = _up_axis(all_qpos[:, 3:7] / np.linalg.norm(all_qpos[:, 3:7], axis=1, keepdims=True))
     up_ref = _up_axis(ref_quat)
@@ -160,10 +168,10 @@ def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: Validation
     sim_qpos = np.where(frame_step[:, None] < 0, qpos[0][None], all_qpos[np.maximum(frame_step, 0)])
     valid = np.ones(T, dtype=bool) if not fell else ref_time < fall_time
     valid[0] = True
-    err = sim_qpos[:, index.qpos_adr] - qpos[:, index.qpos_adr]
+    err = sim_qpos[:, index.qpos_adr] - judge[:, index.qpos_adr]
     rmse_joint = np.sqrt((err[valid] ** 2).mean(axis=0))
     rmse = float(np.sqrt((err[valid] ** 2).mean()))
-    drift = np.linalg.norm(sim_qpos[:, :2] - qpos[:, :2], axis=1)
+    drift = np.linalg.norm(sim_qpos[:, :2] - judge[:, :2], axis=1)
     frame_tilt = np.interp(ref_time, step_end, tilt, left=0.0)
 
     # centre of pressure

@@ -28,6 +28,9 @@ class RobotTrajectory:
     robot:       robot name recorded in the file ("" when absent).
     contacts:    bool [T, 2] (left, right) foot contacts planned by retargeting, or None.
     source:      where it came from (a path or a description).
+    reference_qpos: float64 [T, nq] the kinematic trajectory the robot was asked to perform, when
+                 ``qpos`` is what it executed in physics (the feasibility stage's output), or None.
+    initial_qvel: float64 [nv] the start velocity of that execution, or None.
     """
 
     qpos: np.ndarray
@@ -36,6 +39,8 @@ class RobotTrajectory:
     robot: str = ""
     contacts: np.ndarray | None = None
     source: str = ""
+    reference_qpos: np.ndarray | None = None
+    initial_qvel: np.ndarray | None = None
 
     @property
     def num_frames(self) -> int:
@@ -80,8 +85,20 @@ def load_robot_npz(path: str | Path, robot=None) -> RobotTrajectory:
         contacts = np.asarray(fields["contacts"]).astype(bool)
         if contacts.shape != (qpos.shape[0], 2):
             raise InputError(f"{path}: field 'contacts' has shape {contacts.shape}, expected ({qpos.shape[0]}, 2)")
+    reference = initial_qvel = None
+    if "reference_qpos" in fields:
+        reference = np.asarray(fields["reference_qpos"])
+        if reference.shape != qpos.shape or reference.dtype.kind not in "fi" or not np.isfinite(reference).all():
+            raise InputError(f"{path}: field 'reference_qpos' must be a finite number array of the shape of 'qpos' "
+                             f"{qpos.shape}, got {reference.dtype} {reference.shape}")
+        reference = reference.astype(np.float64)
+    if "initial_qvel" in fields:
+        initial_qvel = np.asarray(fields["initial_qvel"])
+        if initial_qvel.ndim != 1 or initial_qvel.dtype.kind not in "fi" or not np.isfinite(initial_qvel).all():
+            raise InputError(f"{path}: field 'initial_qvel' must be a finite number vector [nv], got {initial_qvel.dtype} {initial_qvel.shape}")
+        initial_qvel = initial_qvel.astype(np.float64)
     trajectory = RobotTrajectory(qpos=qpos, fps=fps, joint_names=names, robot=robot_name,
-                                 contacts=contacts, source=str(path))
+                                 contacts=contacts, source=str(path), reference_qpos=reference, initial_qvel=initial_qvel)
     if robot is not None:
         check_matches_robot(trajectory, robot, where=str(path))
     return trajectory
@@ -116,6 +133,9 @@ def check_matches_robot(trajectory: RobotTrajectory, robot, where: str = "trajec
                 first = next(i for i, (a, b) in enumerate(zip(got, expected)) if a != b)
                 detail = f"order differs at index {first}: '{got[first]}' where robot has '{expected[first]}'"
             raise InputError(f"{where}: field 'joint_names' does not match robot '{robot.name}': {detail}")
+    if trajectory.initial_qvel is not None and trajectory.initial_qvel.shape != (robot.model.nv,):
+        raise InputError(f"{where}: field 'initial_qvel' has {trajectory.initial_qvel.size} values but robot "
+                         f"'{robot.name}' has nv={robot.model.nv}")
     if trajectory.robot and trajectory.robot != robot.name:
         raise InputError(
             f"{where}: field 'robot' is '{trajectory.robot}' but validating against robot '{robot.name}' "

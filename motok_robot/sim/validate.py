@@ -16,8 +16,11 @@ import numpy as np
 
 from motok_robot import __version__
 from motok_robot.feasibility import BalanceConfig, BalancePlan, build_plan
+from motok_robot.errors import InputError
 from motok_robot.sim.config import ValidationConfig
-from motok_robot.sim.feedforward import GOALS_FILE, feedforward_goals, goals_digest, save_servo_goals, servo_gains
+from motok_robot.sim.fidelity import fidelity_measures
+from motok_robot.feasibility.feedforward import (GOALS_FILE, feedforward_goals, goals_digest, load_servo_goals,
+                                                 save_servo_goals, servo_gains)
 from motok_robot.sim.kinematic import KinematicResult, replay
 from motok_robot.robots.index import RobotIndex, index_robot
 from motok_robot.sim.report import SCHEMA, build_checks, robot_description_record, summary_text, write_report
@@ -47,12 +50,12 @@ class ValidationResult:
 def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationConfig | None = None,
                         out_dir: str | Path | None = None, physics: bool = True, plots: bool = True,
                         render: bool = False, input_sha256: str | None = None,
-                        balance: BalanceConfig | None = None) -> ValidationResult:
+                        balance: BalanceConfig | None = None, servo_goals: dict | None = None) -> ValidationResult:
     """Validate ``trajectory`` on ``robot`` (a ``Robot`` or a prebuilt :class:`RobotIndex`).
 
     With ``out_dir``, writes ``report.json``, the PNG plots (``plots``) and ``validation.mp4``
     (``render``) there.  With physics, the servo goals of the rollout (feedforward by default,
-    see :mod:`motok_robot.sim.feedforward`) are recorded in ``report["servo_goals"]`` and, with
+    see :mod:`motok_robot.feasibility.feedforward`) are recorded in ``report["servo_goals"]`` and, with
     ``out_dir``, written to ``servo_goals.npz``, which playback streams.  ``input_sha256`` (the
     file's digest) is recorded in ``input`` so a later stage can check that the file it plays
     is the one validated.  Raises :class:`~motok_robot.errors.InputError` when the trajectory
@@ -61,13 +64,17 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
     ``balance`` (a :class:`~motok_robot.feasibility.config.BalanceConfig`, default: the robot's
     defaults) runs the rollout closed loop with the balance controller, whose plan is built from
     this trajectory and stored with the servo goals, so playback runs the same controller;
-    ``BalanceConfig(enabled=False)`` plays the goals open loop.
+    ``BalanceConfig(enabled=False)`` plays the goals open loop.  ``servo_goals`` (a dict as
+    :func:`~motok_robot.feasibility.feedforward.load_servo_goals` returns) replaces both: the
+    rollout plays those goals with that plan, as the feasibility stage made them.  A trajectory
+    with ``reference_qpos`` (the feasibility stage's executed trajectory) is judged against that
+    reference: falls, tracking, drift and fidelity.
     """
     config = config or ValidationConfig()
     index = robot if isinstance(robot, RobotIndex) else index_robot(robot)
     check_matches_robot(trajectory, _RobotView(index), where=trajectory.source or "trajectory")
     timing = {}
-    roll = goals = plan = None
+    roll = goals = plan = fidelity = None
     start = time.perf_counter()
     kin = replay(index, trajectory.qpos, trajectory.fps, config)
     timing["kinematic"] = time.perf_counter() - start
@@ -78,12 +85,21 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
             stiffness = np.zeros_like(stiffness)  # the reference angles (still within the servo's limits)
         goals = feedforward_goals(index, kin.joint_pos, kin.joint_vel, kin.torque, trajectory.fps, stiffness, damping,
                                   config.servo_goal_velocity_fraction)
-        balance = balance if balance is not None else BalanceConfig()
-        if balance.enabled:
-            plan = build_plan(index, trajectory.qpos, trajectory.fps, kin.contact, balance)
-        roll = simulate(index, trajectory.qpos, trajectory.fps, config, goals=goals, plan=plan)
+        if servo_goals is not None and servo_goals["goals"].shape != goals.shape:
+            raise InputError(f"{trajectory.source or 'trajectory'}: the servo goals have shape "
+                             f"{servo_goals['goals'].shape}, the trajectory needs {goals.shape}")
+        if servo_goals is not None:  # the goals and controller plan the feasibility stage made
+            goals, plan = servo_goals["goals"], servo_goals.get("plan")
+        else:
+            balance = balance if balance is not None else BalanceConfig()
+            if balance.enabled:
+                plan = build_plan(index, trajectory.qpos, trajectory.fps, kin.contact, balance)
+        judge = trajectory.reference_qpos if trajectory.reference_qpos is not None else trajectory.qpos
+        roll = simulate(index, trajectory.qpos, trajectory.fps, config, goals=goals, plan=plan,
+                        initial_qvel=trajectory.initial_qvel, judge_qpos=judge)
+        fidelity = fidelity_measures(index, roll.qpos, judge, roll.valid_frames)
         timing["physics"] = time.perf_counter() - start
-    checks, metrics, per_foot, per_joint = build_checks(index, kin, roll, config, trajectory.contacts)
+    checks, metrics, per_foot, per_joint = build_checks(index, kin, roll, config, trajectory.contacts, fidelity)
     report = {
         "schema": SCHEMA, "version": __version__, "passed": metrics["passed"],
         "failed_checks": [c.name for c in checks if not c.passed], "robot": index.name,
@@ -93,7 +109,8 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
         "per_foot": per_foot, "per_joint": per_joint, "config": config.to_dict(), "timing_s": timing,
         "outputs": {"report": None, "plots": [], "video": None},
         "servo_goals": None if goals is None else {
-            "mode": "feedforward" if config.servo_feedforward else "reference", "file": None,
+            "mode": servo_goals["mode"] if servo_goals is not None else
+            "feedforward" if config.servo_feedforward else "reference", "file": None,
             "sha256": goals_digest(goals)},
     }
     report["robot_description"] = robot_description_record(index)
@@ -123,13 +140,23 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
 
 def validate_file(path: str | Path, robot, config: ValidationConfig | None = None, out_dir: str | Path | None = None,
                   physics: bool = True, plots: bool = True, render: bool = False) -> ValidationResult:
-    """Read ``path`` (robot.npz), check it fits ``robot`` and validate it (see :func:`validate_trajectory`)."""
+    """Read ``path`` (robot.npz), check it fits ``robot`` and validate it (see :func:`validate_trajectory`).
+
+    When ``servo_goals.npz`` lies beside ``path`` and was made from this very file (its
+    ``source_sha256``), as the feasibility stage leaves them, the rollout plays those goals."""
     import hashlib
 
     index = robot if isinstance(robot, RobotIndex) else index_robot(robot)
     trajectory = load_robot_npz(path, _RobotView(index))
     digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
-    return validate_trajectory(trajectory, index, config, out_dir, physics, plots, render, input_sha256=digest)
+    beside = Path(path).with_name(GOALS_FILE)
+    servo_goals = None
+    if physics and beside.is_file():
+        candidate = load_servo_goals(beside)
+        if candidate["source_sha256"] == digest and candidate["mode"] == "feasibility":
+            servo_goals = candidate
+    return validate_trajectory(trajectory, index, config, out_dir, physics, plots, render, input_sha256=digest,
+                               servo_goals=servo_goals)
 
 
 def write_servo_goals(result: ValidationResult, out_dir: str | Path) -> Path | None:
