@@ -39,6 +39,7 @@ REGISTRARS = (
     "motok_robot.tokenizer.cli",
     "motok_robot.robots.cli",
     "retarget.cli",
+    "motok_robot.feasibility.cli",
     "motok_robot.sim.cli",
     "motok_robot.servo.cli",
     "motok_robot.eval.cli",

@@ -101,7 +101,7 @@ class RefineConfig:
     #: spacing of the spline knots of the goal offsets (s); offsets are linear between knots
     knot_s: float = 0.1
     #: standard deviation of the knot perturbations (rad)
-    noise_rad: float = 0.05
+    noise_rad: float = 0.1
     #: largest offset the refinement may add to a goal (rad)
     max_offset_rad: float = 0.4
     #: which joints get offsets: "legs" (the balance controller's leg joints and hip yaws) or "all"

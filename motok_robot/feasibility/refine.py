@@ -162,8 +162,10 @@ def refine_goals(index, qpos: np.ndarray, fps: float, goals: np.ndarray, plan: B
     tick0 = 0
     while tick0 < nticks:
         H = min(horizon, nticks - tick0)
-        now = tick0 * physics.tick_s
-        free = knot_time > now + 1e-9
+        # a knot is free while it still shapes a goal frame no executed tick has used
+        pending = np.nonzero(~frozen)[0]
+        first_open = frame_time[pending[0]] if pending.size else np.inf
+        free = knot_time > first_open - config.knot_s + 1e-9
         candidates = np.repeat(knots[None], config.samples, axis=0)
         noise = rng.normal(0.0, config.noise_rad, size=candidates.shape)
         noise[0] = 0.0

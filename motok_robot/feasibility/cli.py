@@ -1,0 +1,86 @@
+"""``motok-robot feasible``: turn a retargeted robot.npz into the trajectory the robot executes.
+
+Light module: MuJoCo and the stage are imported inside the handler.
+
+    motok-robot feasible robot.npz --out feasible/            # feasible/robot.npz, servo_goals.npz, feasibility.json
+    motok-robot validate feasible/robot.npz --out feasible/   # judged against the reference it was asked to do
+    motok-robot feasible robot.npz --out f/ --retime 1.5 --refine --samples 16
+
+Exit status: 0 when the executed robot stayed up, 1 when it fell, 2 for a usage or input error.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(commands, groups) -> None:
+    parser = commands.add_parser(
+        "feasible", help="make a robot trajectory executable in physics (balance controller, CoM path, refinement)",
+        description="Feasibility stage: from a retargeted robot.npz, compute servo goals (ZMP-consistent CoM path, "
+                    "inverse-dynamics feedforward, optional predictive-sampling refinement over MuJoCo rollouts) and "
+                    "the balance controller's plan, roll the robot out from rest with the controller in the loop, "
+                    "and write the executed robot.npz (with the reference it was asked to do), servo_goals.npz "
+                    "and feasibility.json. Validate the result with `motok-robot validate OUT/robot.npz`.",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("input", help="robot.npz from retargeting")
+    parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    parser.add_argument("--robot", help="installed robot name (default: the 'robot' field of the npz)")
+    parser.add_argument("--retime", type=float, default=1.0, metavar="F",
+                        help="play the motion F times slower, 1-4 (default 1: human timing)")
+    parser.add_argument("--no-zmp-shift", action="store_true", help="keep the retargeted CoM path")
+    parser.add_argument("--zmp-axes", choices=("lateral", "both"), default="lateral",
+                        help="directions the CoM may move (default lateral)")
+    parser.add_argument("--no-balance", action="store_true", help="no balance controller (open-loop goals)")
+    parser.add_argument("--refine", action="store_true", help="refine the goals by predictive sampling (slower)")
+    parser.add_argument("--samples", type=int, default=None, help="refinement: rollouts per planning step (default 16)")
+    parser.add_argument("--horizon", type=float, default=None, metavar="S", help="refinement: horizon in s (default 0.4)")
+    parser.set_defaults(func=run_feasible)
+
+
+def run_feasible(args) -> int:
+    import dataclasses
+    import sys
+    from pathlib import Path
+
+    from motok_robot.errors import InputError
+    from motok_robot.feasibility.config import BalanceConfig, FeasibilityConfig, RefineConfig
+    from motok_robot.sim.cli import _robot_for
+
+    refine = RefineConfig()
+    if args.samples is not None:
+        refine = dataclasses.replace(refine, samples=args.samples)
+    if args.horizon is not None:
+        refine = dataclasses.replace(refine, horizon_s=args.horizon)
+    config = FeasibilityConfig(retime=args.retime, zmp_shift=not args.no_zmp_shift, zmp_axes=args.zmp_axes,
+                               refine=args.refine, balance=BalanceConfig(enabled=not args.no_balance),
+                               refine_config=refine)
+    path = Path(args.input)
+    if not path.is_file():
+        raise InputError(f"{path}: file not found")
+    from retarget.io import read_robot_npz
+
+    from motok_robot.feasibility.stage import make_feasible, write_feasible
+
+    index = _robot_for(path, args.robot, {})
+    trajectory = read_robot_npz(path)
+    if len(trajectory.joint_names) != index.nj or list(trajectory.joint_names) != list(index.joint_names):
+        raise InputError(f"{path}: field 'joint_names' does not match robot '{index.name}'")
+
+    def progress(done, total):
+        print(f"\rrefine {done:5.1f} / {total:.1f} s", end="" if sys.stdout.isatty() else "\n", flush=True)
+
+    result = make_feasible(trajectory, index, config, progress=progress if args.refine else None)
+    if args.refine and sys.stdout.isatty():
+        print()
+    out = write_feasible(result, args.out, index.name)
+    rec = result.record
+    shift = rec.get("zmp_shift")
+    print(f"{index.name}: {result.trajectory.qpos.shape[0]} frames, time warp {rec['time_warp']:.2f}x"
+          + (f", CoM moved up to {shift['com_shift_m_max'] * 100:.1f} cm (cart-table ZMP outside "
+             f"{shift['zmp_outside_before']:.0%} -> {shift['zmp_outside_after']:.0%} of support frames)" if shift else ""))
+    print(f"  executed from rest{' with the balance controller' if result.plan is not None else ' open loop'}: "
+          f"{'FELL' if result.fell else 'stayed up'}, root {rec['executed']['base_drift_max_m']:.3f} m from the reference at most; "
+          f"{rec['timing_s']['total']:.1f} s")
+    print(f"wrote {out} (+ servo_goals.npz, feasibility.json); validate it: motok-robot validate {out} --out {Path(args.out)}")
+    return 1 if result.fell else 0
