@@ -1,4 +1,5 @@
-"""``motok-robot robots list`` and ``motok-robot robots show NAME [--render FILE.png]``.
+"""``motok-robot robots list``, ``motok-robot robots show NAME [--render FILE.png]`` and
+``motok-robot robots add MJCF --out NAME.toml`` (draft a description for a new robot).
 
 Light module: mujoco is imported inside the handlers only.
 """
@@ -23,6 +24,23 @@ def register(commands, groups) -> None:
     p.add_argument("--render", metavar="FILE.png", help="also draw the nominal standing pose into this PNG")
     p.add_argument("--size", default="640x800", metavar="WxH", help="render size in pixels (default 640x800)")
     p.set_defaults(func=cmd_show)
+
+    p = robots.add_parser(
+        "add",
+        help="draft a robot description (NAME.toml) from an MJCF",
+        description="Draft NAME.toml for a humanoid from its MJCF: feet, legs, arms and head from the kinematic tree, "
+                    "keypoint and sole sites (added to a copy NAME.xml beside the TOML; the input is never written), "
+                    "limb scales, a nominal pose, limits. Renders a check image (NAME.png) and lists what it could "
+                    "not infer, each with the line to edit (docs/robots.md, 'Adding a robot').",
+    )
+    p.add_argument("mjcf", metavar="MJCF", help="the robot's MJCF (.xml); it needs a free joint and hinges")
+    p.add_argument("--out", required=True, metavar="NAME.toml", help="the description to write (NAME is the robot name)")
+    p.add_argument("--name", default=None, help="robot name (default: the --out file's stem)")
+    p.add_argument("--render", default="", metavar="FILE.png", help="check image (default NAME.png beside the TOML)")
+    p.add_argument("--no-render", action="store_true", help="do not draw the check image")
+    p.add_argument("--knee-bend", type=float, default=0.4, metavar="RAD", help="knee bend of the nominal pose (default 0.4; 0: zero pose)")
+    p.add_argument("--force", action="store_true", help="overwrite an earlier draft (NAME.toml, NAME.xml, NAME.png)")
+    p.set_defaults(func=cmd_add)
 
 
 def cmd_list(args: argparse.Namespace) -> int:
@@ -109,3 +127,30 @@ def cmd_show(args: argparse.Namespace) -> int:
         save_png(image, args.render)
         print(f"\nwrote {args.render} ({width}x{height}, nominal pose, camera 'track')")
     return 0
+
+
+def cmd_add(args: argparse.Namespace) -> int:
+    import os
+
+    if not args.no_render:
+        os.environ.setdefault("MUJOCO_GL", "egl")
+    from motok_robot.robots.draft import draft
+
+    result = draft(args.mjcf, args.out, name=args.name, knee_bend=args.knee_bend,
+                   render=None if args.no_render else args.render, force=args.force)
+    print(f"wrote {result.toml_path}" + (f" and {result.mjcf_path} (a copy of {args.mjcf})" if result.copied else ""))
+    if result.image_path:
+        print(f"wrote {result.image_path} (nominal pose, front and side, keypoint and sole sites labelled)")
+    print("\ninferred:")
+    for line in result.summary:
+        print(f"  {line}")
+    if result.load_error:
+        print(f"\nthe draft does not load yet: {result.load_error}")
+    if result.unsure:
+        print(f"\ncould not infer ({len(result.unsure)}): edit these lines")
+        for u in result.unsure:
+            print(f"  {u.format()}")
+    else:
+        print("\ncould not infer: nothing")
+    print(f"\nthen: motok-robot robots show {result.toml_path} --render pose.png")
+    return 0 if result.load_error is None else 1
