@@ -36,6 +36,8 @@ def register(commands, groups) -> None:
                    help=f"mid-swing clearance of the lowest sole corner in metres (default {d.swing.height}; 0 = no swing-foot constraints)")
     p.add_argument("--foot-gap", type=float, default=d.min_foot_gap, metavar="LEGS",
                    help=f"smallest gap between the inner sole edges across the heading, robot leg lengths (default {d.min_foot_gap}; negative = off)")
+    p.add_argument("--no-cache", action="store_true",
+                   help="do not use or write the compiled-problem cache ($MOTOK_ROBOT_CACHE, default ~/.cache/motok-robot)")
     add_balance_arguments(p)
     p.add_argument("--plot", default=None, metavar="FILE.png", help="also draw the result (targets vs robot, sole heights, errors)")
     p.set_defaults(func=run)
@@ -82,6 +84,15 @@ def balance_config(args: argparse.Namespace, config=None):
                    collision=replace(config.collision, enabled=not args.no_self_collision))
 
 
+def _cache_words(statuses: list[str]) -> str:
+    if not statuses or all(s == "off" for s in statuses):
+        return "cache off"
+    hit = sum(s == "hit" for s in statuses)
+    if hit == len(statuses):
+        return "compiled, from the cache"
+    return f"{hit} of {len(statuses)} from the cache, the rest built; compiling them in the background"
+
+
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
@@ -108,14 +119,16 @@ def run(args: argparse.Namespace) -> int:
     import time
 
     t0 = time.perf_counter()
-    retargeter = Retargeter(robot, config)
+    retargeter = Retargeter(robot, config, cache=False if args.no_cache else None)
     retargeter.prepare(len(motion.joints))
     build = time.perf_counter() - t0
+    hits = [p.cache_status for p in retargeter._problems.values()]
     result = retargeter.run(motion.joints, motion.fps, source=motion.name)
     m = measure(retargeter.kin, result.x, result.contacts, result.keypoint_error, result.fps, config.ground_height)
     failed = result.failed_windows()
     print(
-        f"{robot.name}: {m.frames} frames, {len(result.windows)} windows ({config.mode}), problem built in {build:.1f} s, "
+        f"{robot.name}: {m.frames} frames, {len(result.windows)} windows ({config.mode}), problem ready in {build:.1f} s "
+        f"({_cache_words(hits)}), "
         f"solved in {result.solve_seconds:.2f} s ({m.frames / max(result.solve_seconds, 1e-9):.0f} frames/s)\n"
         f"  keypoint error mean {m.keypoint_error_mean * 100:.2f} cm; {m.contact_phases} contact phases, sole drift max "
         f"{m.sole_drift_max * 1000:.2f} mm, lowest sole corner {m.sole_min_height * 1000:.2f} mm\n"

@@ -227,8 +227,234 @@ class WindowSolution:
     solve_seconds: float
 
 
+class StageFunctions:
+    """The window problem split into one stage per frame (the problem's structure).
+
+    Stage ``t`` sees ``z = (x[t-2], x[t-1], x[t])`` (and ``x[t+1]`` when the ZMP term is on)
+    plus its own parameters ``s`` (targets, heading, foot directions, contacts of frame ``t``,
+    then the weights of the history terms, the ZMP stencil, frames per second and the ground
+    height). It returns the frame's objective ``f_t = |r_t|^2`` and constraint rows ``g_t``;
+    the window's objective is ``sum_t f_t`` and its rows are ``g_t`` stacked. Because every
+    stage touches three or four consecutive frames only, the gradient, constraint Jacobian and
+    Lagrangian Hessian of the window are sums of small per-stage blocks: they are built
+    symbolically for one stage (SX, exact) and assembled for the window with MX, so building
+    the problem and generating its C code cost the same for a 60-frame window as for a few
+    frames, instead of growing with the window (the whole-window SX graph of the exact
+    Hessian had 1.15 M instructions).
+    """
+
+    #: per-stage constants after the frame parameters: velocity weight, acceleration weight,
+    #: ZMP weight, ZMP stencil (1 central, 0 one-sided at the window end), fps, ground height
+    N_CONST = 6
+
+    def __init__(self, kin: "RobotKinematics", weights: CostWeights, hessian: str, velocity_constraints: bool,
+                 collision_pairs: tuple, collision_margin: float, zmp: bool):
+        robot = kin.robot
+        nx, nj, K = kin.nx, kin.nj, len(robot.keypoints)
+        L = kin.leg_length
+        self.offsets = (-2, -1, 0, 1) if zmp else (-2, -1, 0)
+        span = len(self.offsets)
+        z = ca.SX.sym("z", nx * span)
+        xs = {o: z[i * nx : (i + 1) * nx] for i, o in enumerate(self.offsets)}
+        ns = 3 * K + 1 + 4 + 2
+        self.ns = ns + self.N_CONST
+        s = ca.SX.sym("s", self.ns)
+        target, heading, foot, contact = s[: 3 * K], s[3 * K], s[3 * K + 1 : 3 * K + 5], s[3 * K + 5 : 3 * K + 7]
+        w_vel, w_acc, w_zmp, central, fps, ground = (s[ns + i] for i in range(self.N_CONST))
+
+        kp_w = np.array([k.weight for k in robot.keypoints], dtype=np.float64)
+        pos_scale = np.concatenate([np.full(3, 1.0 / L), np.ones(3 + nj)])  # velocity/accel in leg lengths
+        nominal_j = kin.nominal_x[6:]
+        yaw_offset = kin.nominal_x[3]
+        sq = np.sqrt
+        xt, prev, prev2 = xs[0], xs[-1], xs[-2]
+        kp, sole, fwd, corners, com = kin.frame(xt)
+        prev_frame = kin.frame(prev)
+        res = []
+        if K:
+            err = (ca.reshape(target, 3, K) - kp) / L
+            res.append(ca.vec(ca.mtimes(err, ca.diag(ca.DM(np.sqrt(weights.keypoint * kp_w))))))
+        res.append(sq(weights.heading) * (xt[3] - heading - yaw_offset))
+        for side in range(2):
+            res.append(sq(weights.foot_yaw) * (fwd[:2, side] - foot[2 * side : 2 * side + 2]))
+        res.append(sq(weights.nominal) * (xt[6:] - nominal_j))
+        res.append(sq(weights.base_tilt) * xt[4:6])
+        if weights.com > 0 or weights.zmp > 0:
+            centre = (contact[0] * sole[:2, 0] + contact[1] * sole[:2, 1]) / (contact[0] + contact[1] + 1e-9)
+            support = ca.fmin(contact[0] + contact[1], 1.0)
+        if weights.com > 0:
+            res.append(sq(weights.com) * support * (com[:2] - centre) / L)
+        if zmp:
+            # cart-table ZMP from the CoM's second difference: central (t-1, t, t+1), or
+            # one-sided (t-2, t-1, t) at the window's last frame
+            c_m2, c_m1, c_p1 = kin.frame(prev2)[4], prev_frame[4], kin.frame(xs[1])[4]
+            acc_c = (central * (c_m1 - 2 * com + c_p1) + (1 - central) * (c_m2 - 2 * c_m1 + com)) * fps**2
+            zmp_xy = com[:2] - (com[2] - ground) * acc_c[:2] / (GRAVITY + acc_c[2])
+            res.append(sq(weights.zmp) * w_zmp * support * (zmp_xy - centre) / L)
+        res.append(w_vel * sq(weights.velocity) * (xt - prev) * pos_scale)
+        res.append(w_acc * sq(weights.acceleration) * (xt - 2 * prev + prev2) * pos_scale)
+        r = ca.vertcat(*res)
+        f = ca.sumsqr(r)
+
+        g, names = [], []
+        if velocity_constraints:
+            g.append(xt[6:] - prev[6:])
+            names += [f"joint {n} velocity" for n in robot.joint_names]
+        prev_sole, prev_corners = prev_frame[1], prev_frame[3]
+        for side_i, side in enumerate(SIDES):
+            c = corners[:, 4 * side_i : 4 * side_i + 4]
+            g.append(c[2, :].T)
+            names += [f"{side} sole corner {i} height" for i in range(4)]
+            g.append(sole[:2, side_i] - prev_sole[:2, side_i])
+            names += [f"{side} sole slip x", f"{side} sole slip y"]
+            e_now = c[:2, 1] - c[:2, 0]
+            pc = prev_corners[:, 4 * side_i : 4 * side_i + 4]
+            e_prev = pc[:2, 1] - pc[:2, 0]
+            g.append(e_now[0] * e_prev[1] - e_now[1] * e_prev[0])
+            names += [f"{side} sole yaw slip"]
+        # lateral distance of the left sole site from the right one, across the human heading
+        d = sole[:2, 0] - sole[:2, 1]
+        g.append(-ca.sin(heading) * d[0] + ca.cos(heading) * d[1])
+        names += ["feet lateral separation"]
+        self.n_clearance = 0
+        if collision_pairs:
+            clearance, clearance_names = kin.clearance_function(tuple(collision_pairs), collision_margin)
+            g.append(clearance(xt))
+            names += clearance_names
+            self.n_clearance = len(clearance_names)
+        g = ca.vertcat(*g)
+        self.names = names
+        self.ng = int(g.shape[0])
+        self.nz = int(z.shape[0])
+        lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", self.ng)
+        self.fg = ca.Function("stage_fg", [z, s], [f, g])
+        self.grad = ca.Function("stage_grad", [z, s], [f, ca.gradient(f, z)])
+        self.jac = ca.Function("stage_jac", [z, s], [g, ca.jacobian(g, z)])
+        if hessian == "gauss-newton":
+            # Gauss-Newton for the least-squares objective, exact curvature of the constraints
+            Jr = ca.jacobian(r, z)
+            H = lam_f * 2 * ca.mtimes(Jr.T, Jr) + ca.hessian(ca.dot(lam_g, g), z)[0]
+        else:
+            H = ca.hessian(lam_f * f + ca.dot(lam_g, g), z)[0]
+        self.hess = ca.Function("stage_hess", [z, s, lam_f, lam_g], [H])
+
+
+def _scatter(entries_src: np.ndarray, rows: np.ndarray, cols: np.ndarray, shape: tuple, n_src: int):
+    """The sparsity of the ``shape`` matrix with entries at ``(rows, cols)`` and the constant
+    matrix ``A`` (``nnz x n_src``) with ``nonzeros = A @ source`` (entries at the same place add)."""
+    order = np.lexsort((rows, cols))  # column-major, as CasADi stores nonzeros
+    rows, cols, src = rows[order], cols[order], entries_src[order]
+    flat = cols.astype(np.int64) * shape[0] + rows
+    uniq, dest = np.unique(flat, return_inverse=True)
+    urows, ucols = (uniq % shape[0]).astype(np.int64), (uniq // shape[0]).astype(np.int64)
+    colind = np.searchsorted(ucols, np.arange(shape[1] + 1)).astype(np.int64)
+    sp = ca.Sparsity(int(shape[0]), int(shape[1]), colind.tolist(), urows.tolist())
+    A = ca.DM(ca.Sparsity.triplet(len(uniq), int(n_src), dest.tolist(), src.tolist()), 1.0)
+    return sp, A
+
+
+def window_functions(kin: "RobotKinematics", window: int, stage: StageFunctions, prefix: str) -> dict:
+    """The window's NLP functions for IPOPT, assembled from ``stage`` with MX: ``nlp``
+    ``(x, p) -> (f, g)``, ``nlp_grad_f`` ``-> (f, grad_f)``, ``nlp_jac_g`` ``-> (g, jac_g)`` and
+    ``nlp_hess_l`` ``(x, p, lam_f, lam_g) -> triu(H)``; names start with ``prefix``.
+
+    Every stage function is evaluated once for all frames (``Function.map``); the window's
+    Jacobian and Hessian nonzeros are one constant sparse matrix times the stages' nonzeros
+    (the blocks of consecutive stages that overlap add up), so the graph and its C code stay
+    small whatever the window length."""
+    W, nx, K = int(window), kin.nx, len(kin.robot.keypoints)
+    offsets = stage.offsets
+    sizes = [3 * K * W, W, 4 * W, 2 * W, 2 * nx, 1, 2]
+    x = ca.MX.sym("x", nx * W)
+    p = ca.MX.sym("p", int(sum(sizes)))
+    parts, i = [], 0
+    for n in sizes:
+        parts.append(p[i : i + n])
+        i += n
+    target = ca.reshape(parts[0], 3 * K, W)
+    heading, foot, contact = ca.reshape(parts[1], 1, W), ca.reshape(parts[2], 4, W), ca.reshape(parts[3], 2, W)
+    hist, has_hist, clock = ca.reshape(parts[4], nx, 2), parts[5], parts[6]
+    X = ca.reshape(x, nx, W)
+
+    def shifted(o):  # columns x[t + o] for t = 0..W-1 (history before the window; x[W-1] past its end)
+        if o < 0:
+            return ca.horzcat(hist[:, 2 + o :], X[:, : W + o]) if W + o > 0 else hist[:, 2 + o : 2 + o + W]
+        if o > 0:
+            return ca.horzcat(X[:, o:], ca.repmat(X[:, W - 1], 1, o))
+        return X
+
+    Z = ca.vertcat(*[shifted(o) for o in offsets])
+    ones = ca.DM.ones(1, W)
+
+    def first(n, value):  # a row that is ``value`` in the first n frames and 1 after
+        return ca.horzcat(ca.repmat(value, 1, min(n, W)), ones[:, min(n, W) :]) if W > n else ca.repmat(value, 1, W)
+
+    central = ca.DM.ones(1, W)
+    central[W - 1] = 0
+    if len(offsets) < 4:
+        central = ca.DM.zeros(1, W)
+    S = ca.vertcat(target, heading, foot, contact, first(1, has_hist), first(2, has_hist), first(1, has_hist), central,
+                   ca.repmat(clock[0], 1, W), ca.repmat(clock[1], 1, W))
+    ng = stage.ng
+    f_all, g_all = stage.fg.map(W)(Z, S)
+    f = ca.sum2(f_all)
+    g = ca.vec(g_all)
+    _, gz = stage.grad.map(W)(Z, S)
+    grad = 0
+    for a, o in enumerate(offsets):
+        block = gz[a * nx : (a + 1) * nx, :]
+        if o < 0:
+            block = ca.horzcat(block[:, -o:], ca.MX(nx, min(-o, W)))[:, :W]
+        elif o > 0:
+            block = ca.horzcat(ca.MX(nx, o), block[:, : W - o])[:, :W]
+        grad = grad + block
+    grad_f = ca.vec(grad)
+
+    def place(sp_stage, keep_upper: bool):
+        """Rows, columns and source nonzero of every stage nonzero inside the window."""
+        r, c = (np.array(v, dtype=np.int64) for v in sp_stage.get_triplet())
+        n = len(r)
+        rows, cols, src = [], [], []
+        off = np.array(offsets)
+        for t in range(W):
+            if keep_upper:  # Hessian: rows and columns are both frame variables
+                fi, fj = t + off[r // nx], t + off[c // nx]
+                ok = (fi >= 0) & (fi < W) & (fj >= 0) & (fj < W)
+                R, C = fi * nx + r % nx, fj * nx + c % nx
+                ok &= R <= C
+            else:  # Jacobian: rows of stage t, columns of frames t + offset
+                fj = t + off[c // nx]
+                ok = (fj >= 0) & (fj < W)
+                R, C = t * ng + r, fj * nx + c % nx
+            rows.append(R[ok])
+            cols.append(C[ok])
+            src.append(t * n + np.flatnonzero(ok))
+        return np.concatenate(rows), np.concatenate(cols), np.concatenate(src), n
+
+    _, jz = stage.jac.map(W)(Z, S)
+    rows, cols, src, n = place(stage.jac.sparsity_out(1), False)
+    sp, A = _scatter(src, rows, cols, (ng * W, nx * W), n * W)
+    jac_g = ca.sparsity_cast(ca.mtimes(A, ca.sparsity_cast(jz, ca.Sparsity.dense(n * W, 1))), sp)
+
+    lam_f = ca.MX.sym("lam_f")
+    lam_g = ca.MX.sym("lam_g", ng * W)
+    hz = stage.hess.map(W)(Z, S, lam_f, ca.reshape(lam_g, ng, W))
+    rows, cols, src, n = place(stage.hess.sparsity_out(0), True)
+    sp, A = _scatter(src, rows, cols, (nx * W, nx * W), n * W)
+    H = ca.sparsity_cast(ca.mtimes(A, ca.sparsity_cast(hz, ca.Sparsity.dense(n * W, 1))), sp)
+    return {
+        "nlp": ca.Function(f"{prefix}nlp", [x, p], [f, g], ["x", "p"], ["f", "g"]),
+        "grad_f": ca.Function(f"{prefix}nlp_grad_f", [x, p], [f, grad_f], ["x", "p"], ["f", "grad_f_x"]),
+        "jac_g": ca.Function(f"{prefix}nlp_jac_g", [x, p], [g, jac_g], ["x", "p"], ["g", "jac_g_x"]),
+        "hess_lag": ca.Function(f"{prefix}nlp_hess_l", [x, p, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"]),
+    }
+
+
 class WindowProblem:
-    """IPOPT problem for ``window`` frames of one robot; call :meth:`solve` once per window."""
+    """IPOPT problem for ``window`` frames of one robot; call :meth:`solve` once per window.
+
+    ``cache`` (a :class:`retarget.cache.ProblemCache`, or None): where the compiled NLP
+    functions of this problem are looked up (a hit skips the symbolic build) and stored."""
 
     def __init__(
         self,
@@ -239,113 +465,37 @@ class WindowProblem:
         velocity_constraints: bool = True,
         collision_pairs: tuple = (),
         collision_margin: float = 0.0,
+        cache=None,
     ):
         self.kin, self.W, self.weights, self.solver_config = kin, int(window), weights, solver
         self.collision_pairs = tuple(collision_pairs)
         self.velocity_constraints = velocity_constraints
-        nv = kin.nj if velocity_constraints else 0
         robot = kin.robot
-        W, nx, nj, K = self.W, kin.nx, kin.nj, len(robot.keypoints)
-        self.K = K
-        L = kin.leg_length
-        X = ca.SX.sym("X", nx, W)
-        P_target = ca.SX.sym("target", 3 * K, W)
-        P_heading = ca.SX.sym("heading", 1, W)
-        P_foot = ca.SX.sym("foot", 4, W)
-        P_contact = ca.SX.sym("contact", 2, W)
-        P_hist = ca.SX.sym("hist", nx, 2)
-        P_has_hist = ca.SX.sym("has_hist")
-        P_clock = ca.SX.sym("clock", 2)  # frames per second, ground height (m)
-        params = [P_target, P_heading, P_foot, P_contact, P_hist, P_has_hist, P_clock]
-        self._param_shapes = [p.shape for p in params]
-
-        kp_w = np.array([k.weight for k in robot.keypoints], dtype=np.float64)
-        pos_scale = np.concatenate([np.full(3, 1.0 / L), np.ones(3 + nj)])  # velocity/accel in leg lengths
-        nominal_j = kin.nominal_x[6:]
-        yaw_offset = kin.nominal_x[3]
-
-        res = []  # residuals r: the objective is |r|^2 (Gauss-Newton Hessian 2 J_r^T J_r)
-        sq = np.sqrt
-        g, names = [], []
-        frames = [kin.frame(X[:, t]) for t in range(W)]
-        hist_frame = kin.frame(P_hist[:, 1])
-        clearance, clearance_names = kin.clearance_function(self.collision_pairs, collision_margin) if self.collision_pairs else (None, [])
-        for t in range(W):
-            xt = X[:, t]
-            kp, sole, fwd, corners, com = frames[t]
-            # keypoints
-            if K:
-                err = (ca.reshape(P_target[:, t], 3, K) - kp) / L
-                res.append(ca.vec(ca.mtimes(err, ca.diag(ca.DM(np.sqrt(weights.keypoint * kp_w))))))
-            res.append(sq(weights.heading) * (xt[3] - P_heading[t] - yaw_offset))
-            for s in range(2):
-                d = fwd[:2, s] - P_foot[2 * s : 2 * s + 2, t]
-                res.append(sq(weights.foot_yaw) * d)
-            dj = xt[6:] - nominal_j
-            res.append(sq(weights.nominal) * dj)
-            res.append(sq(weights.base_tilt) * xt[4:6])
-            if weights.com > 0 or weights.zmp > 0:
-                m = P_contact[:, t]
-                centre = (m[0] * sole[:2, 0] + m[1] * sole[:2, 1]) / (m[0] + m[1] + 1e-9)
-                support = ca.fmin(m[0] + m[1], 1.0)
-            if weights.com > 0:
-                res.append(sq(weights.com) * support * (com[:2] - centre) / L)
-            if weights.zmp > 0 and W >= 3:
-                # cart-table ZMP from the CoM's second difference (central; one-sided at the
-                # window's last frame; the committed frame before the window at its first)
-                if t == 0:
-                    c3, zw = (hist_frame[4], com, frames[1][4]), P_has_hist
-                elif t == W - 1:
-                    c3, zw = (frames[t - 2][4], frames[t - 1][4], com), 1.0
-                else:
-                    c3, zw = (frames[t - 1][4], com, frames[t + 1][4]), 1.0
-                acc_c = (c3[0] - 2 * c3[1] + c3[2]) * P_clock[0] ** 2
-                zmp = com[:2] - (com[2] - P_clock[1]) * acc_c[:2] / (GRAVITY + acc_c[2])
-                res.append(sq(weights.zmp) * zw * support * (zmp - centre) / L)
-            # smoothness, including the committed frames before the window
-            prev = X[:, t - 1] if t >= 1 else P_hist[:, 1]
-            hw = 1.0 if t >= 1 else P_has_hist
-            res.append(hw * sq(weights.velocity) * (xt - prev) * pos_scale)
-            if t >= 2:
-                acc, aw = xt - 2 * X[:, t - 1] + X[:, t - 2], 1.0
-            elif t == 1:
-                acc, aw = xt - 2 * X[:, 0] + P_hist[:, 1], P_has_hist
-            else:
-                acc, aw = xt - 2 * P_hist[:, 1] + P_hist[:, 0], P_has_hist
-            res.append(aw * sq(weights.acceleration) * acc * pos_scale)
-            # constraints
-            if velocity_constraints:
-                g.append(xt[6:] - prev[6:])
-                names += [f"joint {n} velocity" for n in robot.joint_names]
-            prev_sole, prev_corners = (frames[t - 1][1], frames[t - 1][3]) if t >= 1 else (hist_frame[1], hist_frame[3])
-            for s, side in enumerate(SIDES):
-                c = corners[:, 4 * s : 4 * s + 4]
-                g.append(c[2, :].T)
-                names += [f"{side} sole corner {i} height" for i in range(4)]
-                g.append(sole[:2, s] - prev_sole[:2, s])
-                names += [f"{side} sole slip x", f"{side} sole slip y"]
-                e_now = c[:2, 1] - c[:2, 0]
-                pc = prev_corners[:, 4 * s : 4 * s + 4]
-                e_prev = pc[:2, 1] - pc[:2, 0]
-                g.append(e_now[0] * e_prev[1] - e_now[1] * e_prev[0])
-                names += [f"{side} sole yaw slip"]
-            # lateral distance of the left sole site from the right one, across the human heading
-            h = P_heading[t]
-            d = sole[:2, 0] - sole[:2, 1]
-            g.append(-ca.sin(h) * d[0] + ca.cos(h) * d[1])
-            names += ["feet lateral separation"]
-            if clearance is not None:
-                g.append(clearance(xt))
-                names += clearance_names
-        self._n_clearance = len(clearance_names)
-        self._ng_frame = nv + 2 * (4 + 2 + 1) + 1 + self._n_clearance
-        self._names = names
-        self.nlp_x = ca.vec(X)
-        p = ca.vertcat(*[ca.vec(q) for q in params])
-        r = ca.vertcat(*res)
-        nlp = {"x": self.nlp_x, "p": p, "f": ca.sumsqr(r), "g": ca.vertcat(*g)}
+        W, nx = self.W, kin.nx
+        self.K = len(robot.keypoints)
+        zmp = weights.zmp > 0 and W >= 3
+        self.cache_status = "off"
+        functions = names = None
+        key = None
+        if cache is not None:
+            key = cache.key(kin, W, weights, solver, velocity_constraints, self.collision_pairs, collision_margin)
+            loaded = cache.load(key)
+            if loaded is not None:
+                functions, names, self._n_clearance = loaded
+                self.cache_status = "hit"
+        if functions is None:
+            stage = StageFunctions(kin, weights, solver.hessian, velocity_constraints, self.collision_pairs,
+                                   collision_margin, zmp)
+            prefix = f"rt{key[:12]}_" if key else "rt_"
+            functions, names, self._n_clearance = window_functions(kin, W, stage, prefix), stage.names, stage.n_clearance
+            if cache is not None:
+                self.cache_status = cache.store(key, functions, names, self._n_clearance, kin.nominal_x)
+        self._ng_frame = len(names)
+        self._names = list(names) * W
         opts = {
             "print_time": False,
+            "calc_lam_p": False,
+            "no_nlp_grad": True,
             "ipopt.print_level": 0,
             "ipopt.sb": "yes",
             "ipopt.tol": solver.tol,
@@ -355,18 +505,16 @@ class WindowProblem:
             "ipopt.hessian_approximation": "limited-memory" if solver.hessian == "limited-memory" else "exact",
             "ipopt.linear_solver": solver.linear_solver,
             "ipopt.mu_strategy": solver.mu_strategy,
+            "grad_f": functions["grad_f"],
+            "jac_g": functions["jac_g"],
         }
-        if solver.hessian == "gauss-newton":
-            Jr = ca.jacobian(r, self.nlp_x)
-            lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", nlp["g"].shape[0])
-            # Gauss-Newton for the least-squares objective, exact curvature of the constraints
-            Hg, _ = ca.hessian(ca.dot(lam_g, nlp["g"]), self.nlp_x)
-            H = ca.triu(lam_f * 2 * ca.mtimes(Jr.T, Jr) + Hg)
-            opts["hess_lag"] = ca.Function("nlp_hess_l", [self.nlp_x, p, lam_f, lam_g], [H])
+        if solver.hessian != "limited-memory":
+            opts["hess_lag"] = functions["hess_lag"]
         opts["ipopt.mu_init"] = solver.mu_init
         opts.update({f"ipopt.{k}": v for k, v in solver.extra})
-        self.solver = ca.nlpsol("retarget_window", "ipopt", nlp, opts)
-        self.ng = int(nlp["g"].shape[0])
+        self.functions = functions
+        self.solver = ca.nlpsol("retarget_window", "ipopt", functions["nlp"], opts)
+        self.ng = self._ng_frame * W
 
         zn = float(kin.nominal_x[2])
         zlo, zhi = (solver.base_height_range[0] * zn, solver.base_height_range[1] * zn) if zn > 0 else (-np.inf, np.inf)

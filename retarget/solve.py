@@ -67,6 +67,7 @@ class RetargetResult:
     mode: str = "trajectory"
     collision_pairs: list[str] = field(default_factory=list)  # geom pairs kept apart ("geom1|geom2")
     collision_rounds: int = 0  # re-solves with self-collision rows (0: nothing came close)
+    first_window_seconds: float = float("nan")  # from the start of run() until the first window was solved
 
     @property
     def success(self) -> bool:
@@ -113,13 +114,19 @@ def scaled_contact_config(joints: np.ndarray, config: ContactConfig) -> ContactC
 class Retargeter:
     """Holds a robot's kinematics and the compiled window problems (built once, reused)."""
 
-    def __init__(self, robot: RetargetRobot, config: RetargetConfig = RetargetConfig()):
+    def __init__(self, robot: RetargetRobot, config: RetargetConfig = RetargetConfig(), cache=None):
         if config.mode not in ("trajectory", "per-frame"):
             raise InputError(f"unknown retargeting mode {config.mode!r} (trajectory or per-frame)")
         if config.mode == "trajectory" and not (config.window >= 2 and 0 <= config.overlap < config.window - 1):
             raise InputError(f"window {config.window} / overlap {config.overlap}: need window >= 2 and 0 <= overlap < window - 1")
         self.robot, self.config = robot, config
         self.kin = RobotKinematics.build(robot)
+        # compiled problems on disk (retarget.cache): None = from the environment, False = off
+        from retarget.cache import ProblemCache
+
+        if cache is None:
+            cache = ProblemCache.from_env()
+        self.cache = cache if isinstance(cache, ProblemCache) else (ProblemCache(cache) if cache else None)
         self._problems: dict[tuple, WindowProblem] = {}
         self._monitor = None
 
@@ -140,7 +147,8 @@ class Retargeter:
         if key not in self._problems:
             geometry = tuple(pair_geometry(self.robot.model, *pair) for pair in geom_pairs)
             self._problems[key] = WindowProblem(self.kin, size, self.config.weights, self.config.solver,
-                                                collision_pairs=geometry, collision_margin=self.config.collision.margin)
+                                                collision_pairs=geometry, collision_margin=self.config.collision.margin,
+                                                cache=self.cache)
         return self._problems[key]
 
     def collision_monitor(self):
@@ -241,6 +249,8 @@ class Retargeter:
         reports = self._solve_windows(x, known, clip, (), progress, f"retarget {self.robot.name} ({cfg.mode})")
         active, rounds, reports = self._avoid_self_collision(x, known, clip, reports, progress)
         solve_seconds = time.perf_counter() - start_time
+        if self.cache is not None:
+            self.cache.flush()  # C code of the problems built for this clip, compiled in the background
 
         qpos = self.kin.qpos_from_x(x)
         kp = np.array(self.kin.frame.map(T)(x.T)[0]).reshape(3, K, T, order="F") if K else np.zeros((3, 0, T))
@@ -250,6 +260,7 @@ class Retargeter:
             contacts=contacts, keypoint_error=kp_err, keypoint_names=[k.human_joint for k in self.robot.keypoints],
             targets=targets, source=np.asarray(joints, dtype=np.float32), windows=reports,
             solve_seconds=solve_seconds, mode=cfg.mode, collision_rounds=rounds,
+            first_window_seconds=self._first_window_at - start_time,
             collision_pairs=[self._pair_name(p) for p in active],
         )
 
@@ -274,6 +285,8 @@ class Retargeter:
             )
             x[s:e] = sol.x
             known[s:e] = True
+            if not reports and not geom_pairs:
+                self._first_window_at = time.perf_counter()
             violated = None if sol.violated is None else f"frame {s + sol.violated_frame}: {sol.violated}"
             reports.append(WindowReport(s, e, sol.status, sol.success, sol.iterations, violated, sol.violation, sol.solve_seconds))
         bar.close()
