@@ -67,6 +67,9 @@ class ValidationConfig:
     #: fail when |joint acceleration| exceeds this anywhere (rad/s^2); a jitter detector:
     #: human motion at 20 fps stays below ~100 rad/s^2 on the joints of a small humanoid.
     max_joint_acceleration_radps2: float = 200.0
+    #: base_continuity: largest rotation of the base between two consecutive frames (degrees); a
+    #: servo humanoid cannot turn its torso 45 degrees in one frame (a flip of the solution)
+    max_base_rotation_step_deg: float = 45.0
     #: fail when |required torque| / actuator force limit exceeds this anywhere.
     max_torque_ratio: float = 1.0
     #: friction coefficient of the feet used to distribute the ground reaction in inverse

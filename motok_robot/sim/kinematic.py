@@ -11,7 +11,8 @@
 * required joint torques from inverse dynamics with the ground reaction distributed over
   the sole corners in contact (:mod:`motok_robot.feasibility.dynamics`);
 * balance: centre of mass, support polygon (convex hull of the corners in contact), signed
-  CoM margin, ZMP and its margin.
+  CoM margin, ZMP and its margin;
+* continuity: the angle of the base rotation between consecutive frames (a flipped solution).
 
 Every array in :class:`KinematicResult` has the frame as its first axis (T frames at
 ``fps``); foot arrays are ordered (left, right).
@@ -58,6 +59,7 @@ class KinematicResult:
     contact_force: np.ndarray     # [T, 2, 3] N, ground reaction per foot (sum over corners)
     unsupported_force: np.ndarray  # [T] N, norm of the base force the feet cannot supply
     self_collisions: list = field(default_factory=list)  # [(frame, body1, body2, depth m)]
+    base_rotation_step: np.ndarray = field(default_factory=lambda: np.zeros(0))  # [T-1] deg, base turn frame to frame
 
     @property
     def num_frames(self) -> int:
@@ -143,7 +145,18 @@ def replay(index: RobotIndex, qpos: np.ndarray, fps: float, config: ValidationCo
         com_speed=com_speed, support=support, balance_margin=margin,
         quasi_static=com_speed < config.static_com_speed_mps, zmp=zmp, zmp_margin=zmp_margin,
         joint_pos=joint_pos, joint_vel=joint_vel, joint_acc=joint_acc, torque=torque,
-        contact_force=contact_force, unsupported_force=unsupported, self_collisions=collisions)
+        contact_force=contact_force, unsupported_force=unsupported, self_collisions=collisions,
+        base_rotation_step=base_rotation_steps(qpos[:, 3:7]))
+
+
+def base_rotation_steps(quat: np.ndarray) -> np.ndarray:
+    """Angle (degrees) of the rotation between consecutive base quaternions ``quat[T, 4]`` (w x y z)."""
+    q = np.asarray(quat, dtype=np.float64)
+    if len(q) < 2:
+        return np.zeros(0)
+    q = q / np.maximum(np.linalg.norm(q, axis=1, keepdims=True), 1e-12)
+    dot = np.abs(np.sum(q[1:] * q[:-1], axis=1))  # q and -q are the same rotation
+    return np.degrees(2.0 * np.arccos(np.clip(dot, 0.0, 1.0)))
 
 
 def contact_skating(sole_xy: np.ndarray, contact: np.ndarray, fps: float, speed_threshold: float) -> tuple[np.ndarray, np.ndarray]:

@@ -20,6 +20,7 @@ Schema (``"schema": "motok-robot/validation-report/1"``)::
         "joint_limit_violations": int,       # (frame, joint) pairs beyond the joint range
         "max_velocity_ratio": float,         # max |qdot| / servo velocity limit
         "max_joint_acceleration_radps2": float,
+        "max_base_rotation_step_deg": float,  # largest base rotation between consecutive frames (deg)
         "max_torque_ratio": float,           # max |required torque| / actuator force limit
         "balance_margin_min_m": float|null,  # min signed CoM margin over quasi-static contact frames
         "balance_margin_min_all_m": float|null,  # the same over all contact frames
@@ -52,7 +53,7 @@ Schema (``"schema": "motok-robot/validation-report/1"``)::
     }
 
 Check names: ``foot_skate_ratio``, ``foot_skate_distance``, ``penetration``, ``floating``,
-``self_collision``, ``joint_limits``, ``joint_velocity``, ``joint_acceleration``, ``torque``,
+``self_collision``, ``joint_limits``, ``joint_velocity``, ``joint_acceleration``, ``base_continuity``, ``torque``,
 ``static_balance``, ``zmp``, and with physics ``fall``, ``tracking``, ``base_drift``,
 ``center_of_pressure``.  A check whose value cannot be measured (e.g. no quasi-static
 contact frame for static balance) passes with ``value: null`` and says why in ``details``.
@@ -204,6 +205,12 @@ def build_checks(index: RobotIndex, kin: KinematicResult, roll: RolloutResult | 
                          "|joint acceleration| (finite differences)",
                          _frames((acc > c.max_joint_acceleration_radps2).any(1)),
                          {"worst_joint": index.joint_names[worst]}))
+    steps = np.asarray(kin.base_rotation_step, dtype=np.float64)
+    max_step = float(steps.max()) if len(steps) else 0.0
+    checks.append(_upper("base_continuity", max_step, c.max_base_rotation_step_deg, "deg",
+                         "largest rotation of the base between two consecutive frames (a flip of the solution)",
+                         [int(t) + 1 for t in np.flatnonzero(steps > c.max_base_rotation_step_deg)],
+                         {"worst_frame": int(np.argmax(steps)) + 1 if len(steps) else None}))
     torque_ratio = np.abs(kin.torque) / np.maximum(index.torque_limit, 1e-9)
     worst = int(np.argmax(torque_ratio.max(axis=0)))
     checks.append(_upper("torque", float(torque_ratio.max()), c.max_torque_ratio, "ratio",
@@ -239,6 +246,7 @@ def build_checks(index: RobotIndex, kin: KinematicResult, roll: RolloutResult | 
         "max_penetration_m": penetration, "max_float_m": max_float,
         "self_collision_frames": len(collision_frames), "joint_limit_violations": int(violating.sum()),
         "max_velocity_ratio": float(vel_ratio.max()), "max_joint_acceleration_radps2": float(acc.max()),
+        "max_base_rotation_step_deg": max_step,
         "max_torque_ratio": float(torque_ratio.max()), "balance_margin_min_m": margin_qs,
         "balance_margin_min_all_m": margin_all, "zmp_outside_ratio": zmp_ratio, "zmp_max_excursion_m": excursion,
         "unsupported_force_max_n": float(kin.unsupported_force.max()),
