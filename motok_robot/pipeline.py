@@ -72,7 +72,7 @@ PLAYBACK_MODES = ("dry-run", "sim", "port")
 #: Clip length used with constraints when no ``seconds`` is given (the planner's no-text default).
 DEFAULT_CONSTRAINED_SECONDS = 6.0
 #: Stages timed in :attr:`PipelineResult.timings`, in order.
-STAGES = ("generate", "retarget", "validate", "balance", "retime", "plots", "render", "playback")
+STAGES = ("generate", "retarget", "feasibility", "validate", "balance", "retime", "plots", "render", "playback")
 #: validation checks that a slower playback of the same motion can fix
 SPEED_CHECKS = frozenset({"torque", "joint_velocity", "joint_acceleration"})
 #: validation checks of the robot's footing and balance, which retargeting with the ZMP term and a
@@ -182,6 +182,12 @@ class PipelineConfig:
             comes next), are a strict subset of those the first one failed; otherwise the first
             is kept.  Clips that pass (most gestures) never pay for the slower ZMP solve.  0 =
             never re-solve.
+        feasibility: a :class:`motok_robot.feasibility.config.FeasibilityConfig` to run the
+            feasibility stage after retargeting (docs/feasibility.md): the robot trajectory
+            becomes the one the robot executes closed loop, judged against the retargeted one,
+            and the balance repair and the slow-down are not tried (the stage owns timing and
+            balance).  None (default): retargeting's trajectory is validated as it is, with the
+            two repairs below.
         balance_acceleration_weight: the joint-acceleration weight (``CostWeights.acceleration``)
             of that re-solve.  The ZMP term rewards CoM accelerations that move the ZMP under the
             foot, and with the plain weight (5) the optimiser gets them from frame-to-frame
@@ -204,6 +210,7 @@ class PipelineConfig:
     max_retime: float = 2.0
     balance_zmp_weight: float = 1000.0
     balance_acceleration_weight: float = 50.0
+    feasibility: object | None = None
 
 
 @dataclass
@@ -727,9 +734,16 @@ class Pipeline:
         acceleration_weight = float(entry["retargeter"].config.weights.acceleration)
         bar.update()
 
+        cfg = self.config
+        servo_goals = None
+        if cfg.feasibility is not None:  # 3a. feasibility -> the executed robot.npz, servo_goals.npz
+            stage("feasibility")
+            t = time.perf_counter()
+            servo_goals = self._feasible(entry, files, tmp, notes)
+            timings["feasibility"] = time.perf_counter() - t
+
         # 3. validation -> report.json, plots, video.mp4
         stage("validate")
-        cfg = self.config
         t = time.perf_counter()
         from motok_robot.sim.report import write_report
         from motok_robot.sim.trajectory import load_robot_npz
@@ -740,11 +754,13 @@ class Pipeline:
             trajectory.source = "robot.npz"
             digest = hashlib.sha256(files["robot"].read_bytes()).hexdigest()  # the playback gate checks it
             return trajectory, validate_trajectory(trajectory, entry["index"], cfg.validation, out_dir=None,
-                                                   input_sha256=digest)
+                                                   input_sha256=digest, servo_goals=servo_goals)
 
         trajectory, validation = validate_robot_file()
         timings["validate"] = time.perf_counter() - t
         unbalanced = BALANCE_CHECKS.intersection(validation.report["failed_checks"])
+        if servo_goals is not None:
+            unbalanced = set()  # the feasibility stage owns balance and timing
         if unbalanced and cfg.balance_zmp_weight > 0 and zmp_weight == 0:
             stage("balance")
             t = time.perf_counter()
@@ -758,7 +774,7 @@ class Pipeline:
         notes[:0] = _retargeting_notes(rt)
         retime_factor = 1.0
         too_fast = SPEED_CHECKS.intersection(validation.report["failed_checks"])
-        if too_fast and cfg.max_retime > 1.0:
+        if too_fast and cfg.max_retime > 1.0 and servo_goals is None:
             stage("retime")
             t = time.perf_counter()
             trajectory, validation, retime_factor = self._slow_down(files["robot"], too_fast, validation, trajectory,
@@ -802,6 +818,25 @@ class Pipeline:
             failed_checks=list(report["failed_checks"]), timings=timings, playback=pb, report=report,
             model=motion.model, notes=notes, retime_factor=retime_factor, zmp_weight=zmp_weight,
             acceleration_weight=acceleration_weight)
+
+    def _feasible(self, entry: dict, files: dict, tmp: Path, notes: list) -> dict:
+        """Run the feasibility stage on ``files["robot"]`` (rewritten as the executed trajectory,
+        with ``servo_goals.npz`` and ``feasibility.json`` beside it); returns the servo goals."""
+        from retarget.io import read_robot_npz
+
+        from motok_robot.feasibility.feedforward import load_servo_goals
+        from motok_robot.feasibility.stage import RECORD_FILE, make_feasible, write_feasible
+
+        result = make_feasible(read_robot_npz(files["robot"]), entry["index"], self.config.feasibility)
+        write_feasible(result, tmp, entry["robot"].name)
+        files["feasibility"] = tmp / RECORD_FILE
+        rec = result.record
+        shift = rec.get("zmp_shift")
+        notes.append(f"feasibility: executed closed loop from rest{', time warp %.2fx' % rec['time_warp'] if rec['time_warp'] != 1 else ''}"
+                     + (f", CoM moved up to {shift['com_shift_m_max'] * 100:.1f} cm" if shift else "")
+                     + (f", goals refined ({rec['refine']['rollouts']} rollouts)" if "refine" in rec else "")
+                     + ("; the robot FELL" if result.fell else ""))
+        return load_servo_goals(tmp / "servo_goals.npz")
 
     def _balance_retargeter(self, entry: dict):
         """:func:`balance_retargeter` of ``entry`` at ``balance_zmp_weight`` and
@@ -907,6 +942,7 @@ class Pipeline:
         from motok_robot.servo.bus import DynamixelBus
         from motok_robot.servo.config import PlaybackConfig
         from motok_robot.servo.convert import ServoMap
+        from motok_robot.servo.imu import ImuMount
         from motok_robot.servo.streamer import PlaybackWarning, Streamer, check_validation_report, load_trajectory
         from motok_robot.servo.timing import FakeClock
 
@@ -938,6 +974,7 @@ class Pipeline:
             rate = robot.bus.control_hz
         config = PlaybackConfig(**{**asdict(defaults), "rate_hz": rate})
         baud = robot.bus.baud if robot.bus is not None else 2_000_000
+        imu = ImuMount.from_spec(robot.bus.imu) if robot.bus is not None and robot.bus.imu is not None else None
         simulated = mode != "port" and not self.config.realtime
         clock = FakeClock() if simulated else None
         log_path = tmp / "playback.csv"
@@ -946,15 +983,16 @@ class Pipeline:
             if mode == "dry-run":
                 from motok_robot.servo.emulator import emulated_chain
 
-                chain = emulated_chain(servo_map, baud=baud, **({"clock": clock} if clock else {}))
-                bus = DynamixelBus(f"emulated:{robot.name}", baud, port_handler=chain)
+                chain = emulated_chain(servo_map, baud=baud, imu_id=imu.id if imu is not None else None,
+                                       **({"clock": clock} if clock else {}))
+                bus = DynamixelBus(f"emulated:{robot.name}", baud, port_handler=chain, imu=imu)
             elif mode == "sim":
                 from motok_robot.servo.sim_rig import SimRig
 
                 video = tmp / "playback_sim.mp4" if render and self.config.sim_video else None
                 bus = rig = SimRig(robot, clock=clock, render_path=video)
             else:
-                bus = DynamixelBus(port, baud)
+                bus = DynamixelBus(port, baud, imu=imu)
         except HardwareError as exc:
             summary.status, summary.error = "error", str(exc)
             return summary

@@ -58,6 +58,12 @@ def register(commands, groups) -> None:
                              "seed take --seconds / --seed); writes OUT/summary.csv")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (new or empty)")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing, non-empty --out when done")
+    parser.add_argument("--feasible", action="store_true",
+                        help="run the feasibility stage after retargeting: robot.npz becomes the trajectory the robot "
+                        "executes closed loop (CoM path, feedforward goals, balance controller), judged against the "
+                        "retarget (docs/feasibility.md); the balance repair and slow-down below are then not tried")
+    parser.add_argument("--feasible-retime", type=float, default=1.0, metavar="F",
+                        help="with --feasible: play the motion F times slower, 1-4 (default 1)")
     parser.add_argument("--max-retime", type=float, default=PipelineConfig.max_retime, metavar="S",
                         help="when the motion is too fast for the servos (the torque, joint_velocity or "
                         "joint_acceleration check fails), play it up to S times slower until those checks pass "
@@ -136,7 +142,8 @@ def run_command(args: argparse.Namespace) -> int:
                                    device=args.device, generation=generation, plots=not args.no_plots,
                                    realtime=args.realtime, sim_video=args.sim_video, max_retime=args.max_retime,
                                    balance_zmp_weight=args.balance_zmp_weight,
-                                   balance_acceleration_weight=args.balance_acceleration_weight, retarget=retarget_config))
+                                   balance_acceleration_weight=args.balance_acceleration_weight, retarget=retarget_config,
+                                   feasibility=_feasibility_config(args)))
     if args.prompts is not None:
         return _run_batch(pipe, prompts, args, robot, playback)
 
@@ -197,3 +204,16 @@ def _run_batch(pipe, prompts, args, robot: str, playback: str) -> int:
         elif r["passed"] != "True":
             print(f"  FAIL  {r['folder']}: {r['failed_checks'].replace(';', ', ')}")
     return 0 if passed == len(rows) else 1
+
+
+def _feasibility_config(args):
+    """The feasibility stage's settings from ``--feasible`` / ``--feasible-retime`` (None: off)."""
+    if not args.feasible:
+        if args.feasible_retime != 1.0:
+            from motok_robot.errors import InputError
+
+            raise InputError("--feasible-retime needs --feasible")
+        return None
+    from motok_robot.feasibility.config import FeasibilityConfig
+
+    return FeasibilityConfig(retime=args.feasible_retime)

@@ -323,8 +323,10 @@ def test_forced_hardware_playback_streams_to_the_port(runs, pipe, tmp_path, monk
 
     def on_emulated_port(self, port, baud=2_000_000, **kwargs):
         ports.append(port)
-        chain = emulated_chain(ServoMap.from_specs(load("op3_like").servos), baud=baud)
-        original(self, port, baud, port_handler=chain)
+        imu = kwargs.get("imu")  # the rig's OpenCR IMU, which the closed-loop playback reads
+        chain = emulated_chain(ServoMap.from_specs(load("op3_like").servos), baud=baud,
+                               imu_id=imu.id if imu is not None else None)
+        original(self, port, baud, port_handler=chain, imu=imu)
 
     monkeypatch.setattr(bus_module.DynamixelBus, "__init__", on_emulated_port)
     from motok_robot.pipeline import Pipeline
