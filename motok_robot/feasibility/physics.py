@@ -133,18 +133,24 @@ class ServoPhysics:
 
     def advance(self, datas: list, goals: np.ndarray, fps: float, tick0: int, nticks: int,
                 controller: BalanceController | None = None, on_tick=None, states: np.ndarray | None = None,
-                perturb=None) -> np.ndarray:
+                perturb=None, previous: np.ndarray | None = None) -> np.ndarray:
         """Advance ``datas`` (B robots) by ``nticks`` ticks from tick ``tick0`` tracking goal
         frames ``goals`` [B, T, nj] (or [T, nj]) at ``fps``.  ``on_tick(k, datas)`` is called
         after each tick (k counted from ``tick0``), ``states`` [B, nticks x steps_per_tick,
         nstate] receives the state after each step, ``perturb(step, b, data)`` may apply forces
-        before a step.  Returns the goals sent [B, nticks, nj]."""
+        before a step.  Every command then goes through playback's limits: the joint range and a
+        per-tick change of at most ``velocity_limit x tick`` from ``previous`` [B, nj] (default:
+        the first planned goal, where playback's ramp-in ends).  Returns the goals sent
+        [B, nticks, nj]."""
         B = len(datas)
         goals = np.asarray(goals, dtype=np.float64)
         if goals.ndim == 2:
             goals = np.broadcast_to(goals, (B,) + goals.shape)
         planned = self.tick_goals(goals, fps, tick0, nticks)
         commands = np.zeros_like(planned)
+        low, high = self.index.joint_range[:, 0], self.index.joint_range[:, 1]
+        max_step = np.asarray(self.index.velocity_limit, dtype=np.float64) * self.tick_s
+        last = planned[:, 0].copy() if previous is None else np.broadcast_to(previous, planned[:, 0].shape).copy()
         gyro = np.zeros((B, 3))
         accel = np.zeros((B, 3))
         step = 0
@@ -154,6 +160,8 @@ class ServoPhysics:
                 for b, data in enumerate(datas):
                     gyro[b], accel[b] = read_imu(self.model, data, self.imu)
                 command = controller.step((tick0 + k) * self.tick_s, command, gyro, accel)
+            command = np.clip(np.clip(command, last - max_step, last + max_step), low, high)
+            last = command
             commands[:, k] = command
             for b, data in enumerate(datas):
                 self._write_goals(data, command[b])

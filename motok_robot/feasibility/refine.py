@@ -160,6 +160,7 @@ def refine_goals(index, qpos: np.ndarray, fps: float, goals: np.ndarray, plan: B
     main_cost = _Cost(index, ref, config, physics.tick_s, index.height_m, 1)
     steps = rollouts = 0
     tick0 = 0
+    last_command = None  # playback's limiter state: the last goal sent
     while tick0 < nticks:
         H = min(horizon, nticks - tick0)
         # a knot is free while it still shapes a goal frame no executed tick has used
@@ -177,7 +178,7 @@ def refine_goals(index, qpos: np.ndarray, fps: float, goals: np.ndarray, plan: B
             cost = _Cost(index, ref, config, physics.tick_s, index.height_m, config.samples)
             cost.fallen[:] = main_cost.fallen[0]
             physics.advance(pool, trial, fps, tick0, H, controller.clone(config.samples) if controller else None,
-                            on_tick=cost)
+                            on_tick=cost, previous=last_command)
             best = int(np.argmin(cost.total))
             rollouts += config.samples
         else:
@@ -185,7 +186,8 @@ def refine_goals(index, qpos: np.ndarray, fps: float, goals: np.ndarray, plan: B
         knots = candidates[best]
         n = min(replan, nticks - tick0)
         chosen = trial[best]
-        physics.advance(main, chosen[None], fps, tick0, n, controller, on_tick=main_cost)
+        sent = physics.advance(main, chosen[None], fps, tick0, n, controller, on_tick=main_cost, previous=last_command)
+        last_command = sent[:, -1]
         # freeze every goal frame the executed ticks interpolated between
         last = int(np.ceil(min((tick0 + n) * physics.tick_s * fps, T - 1)))
         newly = ~frozen & (np.arange(T) <= last)
