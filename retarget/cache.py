@@ -278,12 +278,48 @@ class ProblemCache:
     def flush(self) -> list[str]:
         """Write and compile every queued entry (in a detached low-priority process unless
         ``background=False``); the status of each: compiling, compiled, busy or failed."""
-        out = []
+        if not self._pending:
+            return []
+        lock = self.folder / COMPILE_LOCK
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            self._pending.clear()
+            _warn_once("folder", f"motok-robot cache: cannot create {self.folder} ({exc}); continuing in memory")
+            return ["failed"]
+        # one compile at a time per cache folder (a compile takes a core and up to a few GB for
+        # the largest problems): a process that finds one running leaves its problems to a later one
+        if not _take_lock(lock):
+            out = []
+            for key in list(self._pending):
+                self.events.append(f"busy {key[:12]}")
+                out.append("busy")
+            self._pending.clear()
+            return out
+        out, jobs = [], []
         while self._pending:
             key, item = self._pending.popitem()
-            out.append(self._write(key, *item))
-        if out:
-            self.evict()
+            status, work = self._write(key, *item)
+            out.append(status)
+            if work is not None:
+                jobs.append((work, key))
+        cc = compiler()
+        if not jobs:
+            lock.unlink(missing_ok=True)
+        elif self.background:
+            args = [sys.executable, "-m", "retarget.cache", "compile", cc] + [str(a) for job in jobs for a in job]
+            env = dict(os.environ)
+            env["PYTHONPATH"] = str(Path(__file__).resolve().parents[1]) + os.pathsep + env.get("PYTHONPATH", "")
+            subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                             start_new_session=True, env=env, close_fds=True)
+            self.events += [f"compiling {key[:12]}" for _, key in jobs]
+            out = ["compiling" if s == "written" else s for s in out]
+        else:
+            ok = compile_entries(jobs, cc, nice=False)
+            self.events += [f"{'compiled' if o else 'failed'} {key[:12]}" for o, (_, key) in zip(ok, jobs)]
+            it = iter(ok)
+            out = [("compiled" if next(it) else "failed") if s == "written" else s for s in out]
+        self.evict()
         return out
 
     def evict(self, max_bytes: int = MAX_BYTES) -> list[str]:
@@ -302,21 +338,13 @@ class ProblemCache:
             gone.append(k)
         return gone
 
-    def _write(self, key: str, functions: dict, names: list[str], n_clearance: int, nominal_x: np.ndarray, parts: dict) -> str:
+    def _write(self, key: str, functions: dict, names: list[str], n_clearance: int, nominal_x: np.ndarray, parts: dict):
+        """Write the C code and metadata of one entry into a fresh work folder: ``(status, folder)``."""
         import casadi as ca
 
-        cc = compiler()
-        lock = self.folder / COMPILE_LOCK
         try:
-            self.folder.mkdir(parents=True, exist_ok=True)
             if self.paths(key)[1].exists():
-                return "present"
-            # one compile at a time per cache folder (a compile takes a core and up to a few GB
-            # for the largest problems): a process that finds one running leaves its problem to a
-            # later process
-            if not _take_lock(lock):
-                self.events.append(f"busy {key[:12]}")
-                return "busy"
+                return "present", None
             nlp = functions["nlp"]
             nx_w, np_, ng = nlp.size1_in(0), nlp.size1_in(1), nlp.size1_out(1)
             prefix = nlp.name()[: -len("nlp")]
@@ -336,30 +364,15 @@ class ProblemCache:
             size = sum(p.stat().st_size for p in work.glob("*.c"))
             if size > MAX_SOURCE_BYTES:
                 shutil.rmtree(work, ignore_errors=True)
-                lock.unlink()
                 self.events.append(f"too large {key[:12]}: {size / 1e6:.1f} MB of C")
-                return "too large"
+                return "too large", None
             (work / "meta.json").write_text(json.dumps(meta))
+            return "written", work
         except Exception as exc:
             self.events.append(f"failed {key[:12]}: {exc}")
             _warn_once(f"store {key}", f"motok-robot cache: could not write entry {key[:12]} in {self.folder} ({exc}); "
                                        "continuing in memory")
-            try:
-                lock.unlink()
-            except OSError:
-                pass
-            return "failed"
-        if self.background:
-            args = [sys.executable, "-m", "retarget.cache", "compile", str(work), key, cc]
-            env = dict(os.environ)
-            env["PYTHONPATH"] = str(Path(__file__).resolve().parents[1]) + os.pathsep + env.get("PYTHONPATH", "")
-            subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                             start_new_session=True, env=env, close_fds=True)
-            self.events.append(f"compiling {key[:12]}")
-            return "compiling"
-        ok = compile_entry(work, key, cc, nice=False)
-        self.events.append(f"{'compiled' if ok else 'failed'} {key[:12]}")
-        return "compiled" if ok else "failed"
+            return "failed", None
 
 
 def _take_lock(lock: Path) -> bool:
@@ -380,7 +393,7 @@ def _take_lock(lock: Path) -> bool:
 
 def compile_entry(work: Path, key: str, cc: str, nice: bool = True) -> bool:
     """Compile the C file in ``work`` into ``<key>.so`` next to it, then publish ``<key>.json``
-    (both renamed into place); remove ``work`` and the lock. True on success."""
+    (both renamed into place); remove ``work``. True on success."""
     work = Path(work)
     folder = work.parent
     ok = False
@@ -409,17 +422,31 @@ def compile_entry(work: Path, key: str, cc: str, nice: bool = True) -> bool:
             pass
     finally:
         shutil.rmtree(work, ignore_errors=True)
-        try:
-            (folder / COMPILE_LOCK).unlink()
-        except OSError:
-            pass
     return ok
 
 
+def compile_entries(jobs: list, cc: str, nice: bool = True) -> list[bool]:
+    """Compile ``[(work folder, key)]`` one after the other, then release the folder's compile lock."""
+    try:
+        if nice:
+            try:
+                os.nice(19)
+            except OSError:
+                pass
+        return [compile_entry(Path(work), key, cc, nice=False) for work, key in jobs]
+    finally:
+        for work, _ in jobs[:1]:
+            try:
+                (Path(work).parent / COMPILE_LOCK).unlink()
+            except OSError:
+                pass
+
+
 def main(argv: list[str]) -> int:
-    if len(argv) == 4 and argv[0] == "compile":
-        return 0 if compile_entry(Path(argv[1]), argv[2], argv[3]) else 1
-    print("usage: python -m retarget.cache compile WORKDIR KEY CC", file=sys.stderr)
+    if len(argv) >= 4 and argv[0] == "compile" and len(argv) % 2 == 0:
+        jobs = [(Path(argv[i]), argv[i + 1]) for i in range(2, len(argv), 2)]
+        return 0 if all(compile_entries(jobs, argv[1])) else 1
+    print("usage: python -m retarget.cache compile CC WORKDIR KEY [WORKDIR KEY ...]", file=sys.stderr)
     return 2
 
 
