@@ -124,8 +124,9 @@ def _play_inner(args: argparse.Namespace) -> int:
     check_validation_report(path, args.report, force=args.force, robot_name=robot.name, robot_sha256=digest)
     servo_map = ServoMap.from_specs(robot.servos)
     trajectory = load_trajectory(path, servo_map, robot.name, args.report, robot_sha256=digest)
-    print("streaming the validated feedforward servo goals (servo_goals.npz)" if trajectory.goals == "feedforward"
-          else "streaming the joint angles of the trajectory (no validated servo goals for this file)")
+    print({"feedforward": "streaming the validated feedforward servo goals (servo_goals.npz)",
+           "feasibility": "streaming the feasibility stage's validated servo goals (servo_goals.npz)"}.get(
+        trajectory.goals, "streaming the joint angles of the trajectory (no validated servo goals for this file)"))
     if trajectory.plan is not None:
         print("validated closed loop: " + ("playing it OPEN LOOP (--no-balance)" if args.no_balance else
                                            "the balance controller runs on the torso IMU"))
