@@ -515,13 +515,20 @@ class DynamixelBus(ServoBus):
             pass
 
 
-class _StatusKeepingBulkRead(GroupBulkRead):
-    """The SDK's GroupBulkRead, keeping each device's status error byte and the failing ID."""
+class _StatusKeeping:
+    """Mixin for the SDK's group reads: keeps each device's status error byte and the failing ID.
+    Subclasses say how long each device's reply is and where its data goes."""
 
     def __init__(self, *args):
         super().__init__(*args)
         self.errors: dict[int, int] = {}
         self.failed_id: int | None = None
+
+    def _reply_length(self, device_id: int) -> int:
+        raise NotImplementedError
+
+    def _store(self, device_id: int, data) -> None:
+        raise NotImplementedError
 
     def rxPacket(self):  # noqa: N802 (SDK naming)
         self.last_result = False
@@ -529,40 +536,35 @@ class _StatusKeepingBulkRead(GroupBulkRead):
         self.failed_id = None
         if not self.data_dict:
             return COMM_NOT_AVAILABLE
-        for device_id, entry in self.data_dict.items():
-            data, result, error = self.ph.readRx(self.port, device_id, entry[2])
+        for device_id in list(self.data_dict):
+            data, result, error = self.ph.readRx(self.port, device_id, self._reply_length(device_id))
             if result != COMM_SUCCESS:
                 self.failed_id = device_id
                 return result
-            entry[0] = data
+            self._store(device_id, data)
             self.errors[device_id] = error
         self.last_result = True
         return COMM_SUCCESS
 
 
-class _StatusKeepingSyncRead(GroupSyncRead):
+class _StatusKeepingBulkRead(_StatusKeeping, GroupBulkRead):
+    """The SDK's GroupBulkRead, keeping each device's status error byte and the failing ID."""
+
+    def _reply_length(self, device_id: int) -> int:
+        return self.data_dict[device_id][2]
+
+    def _store(self, device_id: int, data) -> None:
+        self.data_dict[device_id][0] = data
+
+
+class _StatusKeepingSyncRead(_StatusKeeping, GroupSyncRead):
     """The SDK's GroupSyncRead, keeping each servo's status error byte and the failing ID."""
 
-    def __init__(self, *args):
-        super().__init__(*args)
-        self.errors: dict[int, int] = {}
-        self.failed_id: int | None = None
+    def _reply_length(self, device_id: int) -> int:
+        return self.data_length
 
-    def rxPacket(self):  # noqa: N802 (SDK naming)
-        self.last_result = False
-        self.errors = {}
-        self.failed_id = None
-        if not self.data_dict:
-            return COMM_NOT_AVAILABLE
-        for servo_id in self.data_dict:
-            data, result, error = self.ph.readRx(self.port, servo_id, self.data_length)
-            if result != COMM_SUCCESS:
-                self.failed_id = servo_id
-                return result
-            self.data_dict[servo_id] = data
-            self.errors[servo_id] = error
-        self.last_result = True
-        return COMM_SUCCESS
+    def _store(self, device_id: int, data) -> None:
+        self.data_dict[device_id] = data
 
     def fastSyncReadRxPacket(self):  # noqa: N802
         self.last_result = False
