@@ -9,6 +9,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
+# no on-disk cache of compiled retargeting problems (and so no background gcc) unless a test
+# builds its own ProblemCache: the suite must not leave compilers running behind it
+os.environ.setdefault("MOTOK_ROBOT_CACHE", "off")
 
 import pytest  # noqa: E402
 

@@ -478,6 +478,8 @@ def test_read_prompts_plain_and_errors(tmp_path):
         # a CSV row without the header would run "a person bows,,3" as the prompt, with seed 0
         ("a person walks forward\na person bows,,3\n", r"line 2: 'a person bows,,3' looks like a CSV row .* no header"),
         ('"a person bows",4\n', r"line 1: .* looks like a CSV row"),
+        # an unbalanced quote would fold the seconds and seed cells into the text
+        ('text,seconds,seed\n"a person bows,3,1\n', r"line 2: unbalanced double quote"),
     ):
         bad.write_text(content)
         with pytest.raises(InputError, match=message):

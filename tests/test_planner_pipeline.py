@@ -226,6 +226,14 @@ def test_generate_prompts_action_unconditional_and_python_api(runs, tmp_path):
     assert main(["generate", "--prompts", str(prompts), "--out", str(tmp_path / "many")] + common) == 0
     files = sorted(p.name for p in (tmp_path / "many").glob("*.npz"))
     assert files == ["000_a_person_walks_forward.npz", "001_a_person_runs.npz"]
+    # the CSV form that run --prompts reads means the same here: per-row seconds and seed
+    table = tmp_path / "prompts.csv"
+    table.write_text('text,seconds,seed\n"a person walks, slowly",2.0,4\na person runs,,\n')
+    assert main(["generate", "--prompts", str(table), "--out", str(tmp_path / "csv")] + common) == 0
+    with np.load(tmp_path / "csv" / "000_a_person_walks_slowly.npz") as z:
+        assert str(z["text"]) == "a person walks, slowly" and int(z["seed"]) == 4 and z["joints"].shape[0] == 40
+    with np.load(tmp_path / "csv" / "001_a_person_runs.npz") as z:
+        assert int(z["seed"]) == 0 and z["joints"].shape[0] == 30  # --seconds 1.5 and the default seed
     assert main(["generate", "--action", "run", "--out", str(tmp_path / "act")] + common) == 0
     with np.load(tmp_path / "act" / "motion.npz") as z:
         assert str(z["text"]) == "action:run" and z["joints"].shape[0] == 30

@@ -55,7 +55,9 @@ def register(commands, groups) -> None:
     who = gen.add_mutually_exclusive_group()
     who.add_argument("--action", default=None, help="generate an action label instead of text")
     who.add_argument("--unconditional", action="store_true", help="generate without text")
-    gen.add_argument("--prompts", type=Path, default=None, help="file with one prompt per line (# comments); --out is a directory")
+    gen.add_argument("--prompts", type=Path, default=None, help="file with one prompt per line (# comments), or CSV with the header text,seconds,seed "
+                     "(the format of run --prompts; rows without seconds or seed take --seconds / --seed); "
+                     "--out is a directory")
     gen.add_argument("--out", required=True, type=Path, help="motion.npz, or a directory")
     gen.add_argument("--tokenizer", type=Path, default=None, help="tokenizer run (default models/tokenizer)")
     gen.add_argument("--planner-run", type=Path, default=None, help="planner run (default models/planner_<kind>)")
@@ -101,17 +103,6 @@ def _train(args: argparse.Namespace) -> int:
     return 0
 
 
-def read_prompts(path: Path) -> list[str]:
-    """Non-empty, non-comment lines of a prompts file."""
-    if not path.is_file():
-        raise InputError(f"--prompts {path}: file not found")
-    prompts = [ln.strip() for ln in path.read_text().splitlines()]
-    prompts = [p for p in prompts if p and not p.startswith("#")]
-    if not prompts:
-        raise InputError(f"--prompts {path}: no prompts (one per line, # starts a comment)")
-    return prompts
-
-
 def _slug(text: str) -> str:
     return re.sub(r"[^a-z0-9]+", "_", text.lower()).strip("_")[:48] or "motion"
 
@@ -142,7 +133,9 @@ def generate_command(args: argparse.Namespace, generate_one=None) -> int:
         check_seconds(args.seconds, "generate", "--seconds")
     if args.text is not None:
         check_text(args.text)
-    prompts = read_prompts(args.prompts) if args.prompts is not None else None
+    from motok_robot.text.prompts import read_prompts  # the same file format as run --prompts
+
+    prompts = read_prompts(args.prompts, args.seconds, args.seed) if args.prompts is not None else None
     if prompts is not None:
         if args.out.suffix == ".npz" or (args.out.exists() and not args.out.is_dir()):
             raise InputError(f"--out {args.out}: with --prompts, --out must be a directory")
@@ -158,8 +151,8 @@ def generate_command(args: argparse.Namespace, generate_one=None) -> int:
                    top_p=args.top_p, decoder_seed=args.decoder_seed)
     if prompts is not None:
         for i, prompt in enumerate(tqdm(prompts, desc="generating", unit="prompt", disable=None)):
-            motion = one(gen, text=prompt, **options)
-            motion.save(args.out / f"{i:03d}_{_slug(prompt)}.npz")
+            motion = one(gen, **{**options, "text": prompt.text, "seconds": prompt.seconds, "seed": prompt.seed})
+            motion.save(args.out / f"{i:03d}_{_slug(prompt.text)}.npz")
         print(f"{len(prompts)} motions written to {args.out}")
         return 0
     motion = one(gen, text=args.text, action=args.action, unconditional=args.unconditional, **options)
