@@ -117,6 +117,7 @@ class SolverConfig:
     acceptable_tol: float = 1e-4
     constr_viol_tol: float = 1e-6  # metres / radians: contact equalities hold to a micrometre
     max_iter: int = 500  # windows take 20-30 iterations; a self-collision re-solve of a hard window took 203
+    max_cpu_time: float = 60.0  # s per window (windows take well under 1 s); a degenerate input cannot hang a run
     hessian: str = "exact"  # or "gauss-newton" (objective only + exact constraint curvature), "limited-memory"
     linear_solver: str = "mumps"
     mu_strategy: str = "adaptive"

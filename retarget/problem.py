@@ -502,6 +502,7 @@ class WindowProblem:
             "ipopt.acceptable_tol": solver.acceptable_tol,
             "ipopt.constr_viol_tol": solver.constr_viol_tol,
             "ipopt.max_iter": solver.max_iter,
+            "ipopt.max_cpu_time": float(solver.max_cpu_time),
             "ipopt.hessian_approximation": "limited-memory" if solver.hessian == "limited-memory" else "exact",
             "ipopt.linear_solver": solver.linear_solver,
             "ipopt.mu_strategy": solver.mu_strategy,

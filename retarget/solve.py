@@ -28,6 +28,9 @@ from retarget.robot_model import RetargetRobot
 from retarget.swing import swing_clearance, transition_frames
 from retarget.targets import HumanTargets, make_targets
 
+#: off a terminal, clips of more windows than this report progress (a line every 30 s)
+LOG_PROGRESS_WINDOWS = 20
+
 
 @dataclass
 class WindowReport:
@@ -271,7 +274,15 @@ class Retargeter:
         targets, kp_targets, contacts, vel_step, swing, fps = clip
         T = len(x)
         reports: list[WindowReport] = []
-        bar = tqdm(self.windows(T), desc=desc, unit="window", disable=None if progress is None else not progress)
+        windows = list(self.windows(T))
+        if progress is None:  # a terminal gets the bar; a log gets a line every 30 s on long clips
+            import sys
+
+            quiet = not sys.stderr.isatty() and len(windows) <= LOG_PROGRESS_WINDOWS
+            bar = tqdm(windows, desc=desc, unit="window", disable=quiet,
+                       mininterval=0.1 if sys.stderr.isatty() else 30.0)
+        else:
+            bar = tqdm(windows, desc=desc, unit="window", disable=not progress)
         for s, e, commit in bar:
             prob = self.problem(e - s, geom_pairs)
             if s == 0 and known.sum() == 0 and self._presolve_size(e) > 0:
