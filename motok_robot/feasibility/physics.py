@@ -22,7 +22,7 @@ import time
 import mujoco
 import numpy as np
 
-from motok_robot.feasibility.balance import BalanceController, imu_frame
+from motok_robot.feasibility.balance import BalanceController, BalancePlan, imu_frame
 
 
 def servo_model(index, timestep_s: float = 0.004, motor_kp_per_nm: float = 10.0,

@@ -459,7 +459,7 @@ class _Drafter:
         self.keypoints.append((human, name, weight))
 
     def place_sites(self) -> None:
-        M, d = self.M, self.M.d
+        M = self.M
         self.points: dict[str, np.ndarray] = {}
         self.soles = {}
         for side, (chain, groups) in self.legs.items():

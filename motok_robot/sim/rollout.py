@@ -1,9 +1,13 @@
 """Physics rollout: the robot tracks the trajectory with its own actuators.
 
 The robot starts at frame 0 (``qpos[0]``, base velocity and joint velocities from the
-reference's finite differences), with its free base, gravity and contacts, and its
-actuators receive the servo goals linearly interpolated from the clip's frame
-rate to the physics timestep (each step gets the target of the step's end time).
+reference's finite differences, or the file's ``initial_qvel``), with its free base, gravity
+and contacts.  Closed loop (validation's default), the balance controller of
+:mod:`motok_robot.feasibility.balance` corrects the servo goals every 8 ms tick from the
+simulated IMU and the goals are held over the tick, as playback sends them
+(:mod:`motok_robot.feasibility.physics`).  Open loop, the actuators receive the servo goals
+linearly interpolated from the clip's frame rate to the physics timestep (each step gets the
+target of the step's end time) and the rollout runs in C with ``mujoco.rollout``.
 
 Servo goals: the reference joint angles, or the feedforward goals of
 :mod:`motok_robot.feasibility.feedforward` (validation's default, which playback then streams).
@@ -12,8 +16,7 @@ Servo model: the robot's own actuators.  Position actuators (affine bias with a 
 position gain: MuJoCo ``<position>``) get the target angle as control (times the
 transmission gear).  Plain motors are given a PD servo law on a copy of the model:
 ``kp = motor_kp_per_nm x force limit`` (N m/rad), ``kd = motor_kd_ratio x kp``, their force
-limits kept.  The whole open-loop control sequence is known in advance, so the rollout runs
-in C with ``mujoco.rollout`` (no Python in the stepping loop).
+limits kept.
 
 Fall detection (per physics step, relative to the reference so a deliberate squat or bow is
 no fall): the root body is lower than ``fall_height_ratio`` x the reference root height at
@@ -38,12 +41,12 @@ import numpy as np
 from mujoco import rollout as mj_rollout
 
 from motok_robot.feasibility.balance import BalanceController, BalancePlan
+from motok_robot.feasibility.dynamics import finite_difference_qvel
 from motok_robot.feasibility.physics import ServoPhysics
 from motok_robot.feasibility.physics import servo_model as physics_servo_model
-from motok_robot.sim.config import ValidationConfig
-from motok_robot.feasibility.dynamics import finite_difference_qvel
-from motok_robot.sim.geometry import convex_hull, signed_distance
 from motok_robot.robots.index import RobotIndex
+from motok_robot.sim.config import ValidationConfig
+from motok_robot.sim.geometry import convex_hull, signed_distance
 
 
 @dataclass

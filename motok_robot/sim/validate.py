@@ -15,14 +15,14 @@ from pathlib import Path
 import numpy as np
 
 from motok_robot import __version__
-from motok_robot.feasibility import BalanceConfig, BalancePlan, build_plan
 from motok_robot.errors import InputError
-from motok_robot.sim.config import ValidationConfig
-from motok_robot.sim.fidelity import fidelity_measures
+from motok_robot.feasibility import BalanceConfig, BalancePlan, build_plan
 from motok_robot.feasibility.feedforward import (GOALS_FILE, feedforward_goals, goals_digest, load_servo_goals,
                                                  save_servo_goals, servo_gains)
-from motok_robot.sim.kinematic import KinematicResult, replay
 from motok_robot.robots.index import RobotIndex, index_robot
+from motok_robot.sim.config import ValidationConfig
+from motok_robot.sim.fidelity import fidelity_measures
+from motok_robot.sim.kinematic import KinematicResult, replay
 from motok_robot.sim.report import SCHEMA, build_checks, robot_description_record, summary_text, write_report
 from motok_robot.sim.rollout import RolloutResult, servo_model, simulate
 from motok_robot.sim.trajectory import RobotTrajectory, check_matches_robot, load_robot_npz
