@@ -22,10 +22,11 @@ JOINTS = ("l_knee", "r_hip_pitch")  # the servos whose entries are drawn at rand
 RATE = 125.0
 SEEN = {"accepted": 0, "refused": 0}  # how many drawn descriptions the checks let through
 
+# mostly datasheet-valid speeds, so that both accepted and refused descriptions are drawn often
 velocities = st.one_of(st.floats(0.0, 10.0), st.sampled_from([1e-9, 1e6, 1e30, math.inf, -1.0, 4.8, 4.82]),
-                       st.floats(0.05, 4.8), st.floats(0.05, 4.8), st.floats(0.05, 4.8))
+                       st.floats(0.05, 4.8), st.floats(0.05, 4.8), st.floats(0.05, 4.8), st.floats(0.05, 4.8))
 # the exact range (rounded outward), a tick either way, or far off
-widenings = st.one_of(st.just(0), st.just(0), st.just(0), st.integers(-1, 1), st.integers(-400, 400))
+widenings = st.one_of(st.just(0), st.just(0), st.just(0), st.just(0), st.integers(-1, 1), st.integers(-400, 400))
 servo_entries = st.fixed_dictionaries({
     "sign": st.sampled_from([1, -1]),
     "zero": st.integers(1500, 2600),
@@ -48,7 +49,7 @@ def spec_for(base, joint_range, entry):
                                velocity_limit=entry["velocity"])
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
 @given(entries=st.lists(servo_entries, min_size=len(JOINTS), max_size=len(JOINTS)),
        frames=st.lists(st.lists(angles, min_size=len(JOINTS), max_size=len(JOINTS)), min_size=2, max_size=12),
        start=st.floats(0.0, 1.0))
