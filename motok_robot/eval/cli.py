@@ -201,10 +201,14 @@ def _config_file(path: Path | None, cfg):
 
 def _command_line(prefix: str, args: argparse.Namespace) -> str:
     """The command that reproduces ``args`` (options in long form, defaults left out)."""
-    parts = ["motok-robot", *prefix.split()]
-    skip = {"func", "command", "train_command", "eval_command", "data_command", "robots_command", "servo_command"}
+    parts = ["motok-robot"]
+    for assignment in getattr(args, "size_limits", None) or []:  # the top-level --limit NAME=VALUE
+        parts += ["--limit", str(assignment)]
+    parts += prefix.split()
+    skip = {"func", "command", "train_command", "eval_command", "data_command", "robots_command", "servo_command",
+            "size_limits"}
     for key, value in vars(args).items():
-        if key in skip or value is None or value is False:
+        if key in skip or value is None or value is False or (isinstance(value, list) and not value):
             continue
         flag = "--" + key.replace("_", "-")
         if value is True:
