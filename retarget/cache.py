@@ -391,6 +391,14 @@ def _take_lock(lock: Path) -> bool:
             return False
 
 
+def _lower_priority() -> None:
+    """Run this (background compile) process at the lowest CPU priority, where the OS allows it."""
+    try:
+        os.nice(19)
+    except OSError:
+        pass
+
+
 def compile_entry(work: Path, key: str, cc: str, nice: bool = True) -> bool:
     """Compile the C file in ``work`` into ``<key>.so`` next to it, then publish ``<key>.json``
     (both renamed into place); remove ``work``. True on success."""
@@ -399,10 +407,7 @@ def compile_entry(work: Path, key: str, cc: str, nice: bool = True) -> bool:
     ok = False
     try:
         if nice:
-            try:
-                os.nice(19)
-            except OSError:
-                pass
+            _lower_priority()
         sources = sorted(work.glob("*.c"))
         lib = work / "lib.so"
         subprocess.run([cc, *CFLAGS, *map(str, sources), "-o", str(lib), "-lm"], check=True,
@@ -429,10 +434,7 @@ def compile_entries(jobs: list, cc: str, nice: bool = True) -> list[bool]:
     """Compile ``[(work folder, key)]`` one after the other, then release the folder's compile lock."""
     try:
         if nice:
-            try:
-                os.nice(19)
-            except OSError:
-                pass
+            _lower_priority()
         return [compile_entry(Path(work), key, cc, nice=False) for work, key in jobs]
     finally:
         for work, _ in jobs[:1]:
