@@ -80,7 +80,8 @@ def run_feasible(args) -> int:
           + (f", CoM moved up to {shift['com_shift_m_max'] * 100:.1f} cm (cart-table ZMP outside "
              f"{shift['zmp_outside_before']:.0%} -> {shift['zmp_outside_after']:.0%} of support frames)" if shift else ""))
     print(f"  executed from rest{' with the balance controller' if result.plan is not None else ' open loop'}: "
-          f"{'FELL' if result.fell else 'stayed up'}, root {rec['executed']['base_drift_max_m']:.3f} m from the reference at most; "
+          f"{'FELL at %.2f s' % rec['executed']['fall_time_s'] if result.fell else 'stayed up'}, root "
+          f"{rec['executed']['base_drift_max_m']:.3f} m from the reference at most{' before that' if result.fell else ''}; "
           f"{rec['timing_s']['total']:.1f} s")
     print(f"wrote {out} (+ servo_goals.npz, feasibility.json); validate it: motok-robot validate {out} --out {Path(args.out)}")
     return 1 if result.fell else 0

@@ -195,9 +195,11 @@ class ServoPhysics:
 
 
 def execute(index, qpos0: np.ndarray, goals: np.ndarray, fps: float, plan: BalancePlan | None,
-            timestep_s: float = 0.004, initial_qvel: np.ndarray | None = None) -> tuple[np.ndarray, bool]:
+            timestep_s: float = 0.004, initial_qvel: np.ndarray | None = None,
+            fall_tilt_rad: float = 1.0) -> tuple[np.ndarray, int | None]:
     """The rollout of ``goals`` [T, nj] from ``qpos0`` (at rest unless ``initial_qvel``) with the
-    plan's controller: qpos [T, nq] at the frame times, and whether the torso tilted past 1 rad."""
+    plan's controller: qpos [T, nq] at the frame times, and the first frame whose torso is tilted
+    more than ``fall_tilt_rad`` from vertical (validation's ``fall_tilt_rad``), None if none is."""
     physics = ServoPhysics(index, timestep_s=timestep_s, rate_hz=plan.config.rate_hz if plan else 125.0)
     T = goals.shape[0]
     qvel0 = np.zeros(index.model.nv) if initial_qvel is None else initial_qvel
@@ -213,4 +215,5 @@ def execute(index, qpos0: np.ndarray, goals: np.ndarray, fps: float, plan: Balan
     qpos = all_qpos[step]
     quat = qpos[:, 3:7] / np.linalg.norm(qpos[:, 3:7], axis=1, keepdims=True)
     up_z = 1 - 2 * (quat[:, 1] ** 2 + quat[:, 2] ** 2)
-    return qpos, bool((up_z < np.cos(1.0)).any())
+    tilted = np.nonzero(up_z < np.cos(fall_tilt_rad))[0]
+    return qpos, int(tilted[0]) if tilted.size else None

@@ -99,9 +99,13 @@ def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, pr
         record["refine"] = refined.record()
         timing["refine"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    executed, fell = execute(index, task[0], goals, fps, plan, config.timestep_s)
+    executed, fall_frame = execute(index, task[0], goals, fps, plan, config.timestep_s)
     timing["execute"] = time.perf_counter() - t0
-    record["executed"] = {"fell": fell, "base_drift_max_m": float(np.linalg.norm(executed[:, :2] - reference[:, :2], axis=1).max())}
+    upright = slice(0, fall_frame if fall_frame is not None else len(executed))
+    drift = np.linalg.norm(executed[upright, :2] - reference[upright, :2], axis=1)
+    record["executed"] = {"fell": fall_frame is not None,
+                          "fall_time_s": None if fall_frame is None else fall_frame / fps,
+                          "base_drift_max_m": float(drift.max()) if drift.size else 0.0}
     record["balance"] = config.balance.to_dict() if plan is not None else None
     record["timing_s"] = {**timing, "total": time.perf_counter() - started}
     out = dataclasses.replace(trajectory, qpos=executed, reference_qpos=reference,
