@@ -159,3 +159,14 @@ def test_a_robot_that_stands_still_fails_a_walk(op3, tmp_path):
     report = validate_file(path, op3, plots=False).report
     assert not report["passed"]
     assert "base_drift" in report["failed_checks"]
+
+
+def test_loading_the_cli_does_not_import_mujoco():
+    """The command line registers the feasibility stage without importing MuJoCo, so ``run`` and
+    ``validate`` can still pick the headless renderer (MUJOCO_GL=egl) before MuJoCo loads."""
+    import subprocess
+    import sys
+
+    code = ("import sys, motok_robot.cli, motok_robot.feasibility, motok_robot.feasibility.cli; "
+            "assert 'mujoco' not in sys.modules, 'mujoco imported'")
+    subprocess.run([sys.executable, "-c", code], check=True)
