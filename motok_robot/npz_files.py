@@ -81,9 +81,20 @@ def read_npz_fields(path: str | Path, what: str = ".npz file") -> dict[str, np.n
     check_npz_sizes(path, what)
     try:
         with np.load(path, allow_pickle=False) as data:
-            return {key: data[key] for key in data.files}
+            fields = {key: data[key] for key in data.files}
     except Exception as exc:  # noqa: BLE001 - truncated, foreign or pickled content: all input problems
         raise InputError(f"{path}: not a readable .npz file ({' '.join(str(exc).split())[:200]})") from None
+    reject_complex(fields, path)
+    return fields
+
+
+def reject_complex(fields: dict, path: str | Path) -> None:
+    """No project file holds complex numbers: casting them to float would drop the imaginary part
+    silently, so a complex field is an InputError naming it."""
+    for key, value in fields.items():
+        if np.asarray(value).dtype.kind == "c":
+            raise InputError(f"{path}: field '{key}' holds complex numbers ({np.asarray(value).dtype}); "
+                             "real numbers are expected")
 
 
 def scalar_field(fields: dict, key: str, path: str | Path, kind=float):

@@ -40,7 +40,7 @@ import numpy as np
 
 from motok_robot.errors import InputError
 from motok_robot.limits import check_frames, check_rate, check_seconds
-from motok_robot.npz_files import check_npz_sizes, read_npz_fields, scalar_field
+from motok_robot.npz_files import check_npz_sizes, read_npz_fields, reject_complex, scalar_field
 
 MOCAP_SUFFIXES = (".bvh", ".amc", ".json", ".txt")
 
@@ -200,6 +200,7 @@ def read_robot_npz(path: str | Path) -> RobotTrajectory:
             missing = [f for f in ROBOT_NPZ_FIELDS if f not in d.files]
             if missing:
                 raise InputError(f"{path}: not a robot.npz, missing {', '.join(missing)}")
+            reject_complex({f: d[f] for f in ("qpos", "keypoint_error", "source")}, path)
             out = RobotTrajectory(
                 qpos=np.asarray(d["qpos"], dtype=np.float64),
                 joint_names=[str(n) for n in d["joint_names"]],
