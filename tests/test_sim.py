@@ -16,7 +16,7 @@ from motok_robot.errors import InputError
 from motok_robot.sim import synthetic as S
 from motok_robot.sim.config import ValidationConfig
 from motok_robot.feasibility.dynamics import finite_difference, moving_average, zmp_from_centroidal
-from motok_robot.sim.geometry import convex_hull, signed_distance
+from motok_robot.feasibility.geometry import convex_hull, signed_distance
 from motok_robot.sim.kinematic import replay
 from motok_robot.robots.index import body_pairs_in_collision, index_robot
 from motok_robot.sim.report import METRIC_KEYS, frame_ranges, validate_report_dict

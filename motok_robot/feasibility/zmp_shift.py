@@ -28,6 +28,8 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.linalg import spsolve
 
+from motok_robot.feasibility.geometry import convex_hull, heading, nearest_point, signed_distance
+
 GRAVITY = 9.81
 
 
@@ -46,58 +48,12 @@ class ZmpShiftResult:
                 "zmp_outside_after": self.zmp_outside_after, "foot_error_m": self.foot_error_m}
 
 
-def _hull(points: np.ndarray) -> np.ndarray:
-    """Counter-clockwise convex hull [H, 2] of ``points`` [N, 2] (monotone chain)."""
-    pts = sorted(set(map(tuple, np.round(points, 9))))
-    if len(pts) < 3:
-        return np.asarray(pts, dtype=np.float64)
-
-    def cross(o, a, b):
-        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
-
-    lower, upper = [], []
-    for p in pts:
-        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
-            lower.pop()
-        lower.append(p)
-    for p in reversed(pts):
-        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
-            upper.pop()
-        upper.append(p)
-    return np.asarray(lower[:-1] + upper[:-1], dtype=np.float64)
-
-
 def _shrink(hull: np.ndarray, margin: float) -> np.ndarray:
     """The hull pulled toward its centroid by ``margin`` (m), never past the centroid."""
     centre = hull.mean(axis=0)
     d = hull - centre
     r = np.linalg.norm(d, axis=1, keepdims=True)
     return centre + d * np.clip((r - margin) / np.maximum(r, 1e-9), 0.0, 1.0)
-
-
-def _inside(point: np.ndarray, hull: np.ndarray) -> bool:
-    if len(hull) < 3:
-        return False
-    edges = np.roll(hull, -1, axis=0) - hull
-    rel = point - hull
-    return bool(np.all(edges[:, 0] * rel[:, 1] - edges[:, 1] * rel[:, 0] >= -1e-12))
-
-
-def _nearest_in(point: np.ndarray, hull: np.ndarray) -> np.ndarray:
-    """``point`` if inside ``hull``, else the nearest point of its boundary (or of a segment/point)."""
-    if len(hull) >= 3 and _inside(point, hull):
-        return point
-    if len(hull) == 1:
-        return hull[0]
-    best, dist = point, np.inf
-    for a, b in zip(hull, np.roll(hull, -1, axis=0)):
-        ab = b - a
-        t = float(np.clip((point - a) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0))
-        q = a + t * ab
-        d = float(((point - q) ** 2).sum())
-        if d < dist:
-            best, dist = q, d
-    return best
 
 
 def _kinematics(index, qpos: np.ndarray):
@@ -130,19 +86,13 @@ def cart_table_zmp(com: np.ndarray, fps: float, ground: float = 0.0) -> np.ndarr
 
 
 def _support(corners: np.ndarray, contacts: np.ndarray) -> list:
-    return [_hull(corners[t][contacts[t]].reshape(-1, 3)[:, :2]) if contacts[t].any() else np.zeros((0, 2))
+    return [convex_hull(corners[t][contacts[t]].reshape(-1, 3)[:, :2]) if contacts[t].any() else np.zeros((0, 2))
             for t in range(corners.shape[0])]
 
 
 def _outside_fraction(zmp, hulls, tolerance) -> float:
-    n = bad = 0
-    for p, h in zip(zmp, hulls):
-        if len(h) < 3:
-            continue
-        n += 1
-        q = _nearest_in(p, h)
-        bad += float(np.linalg.norm(p - q)) > tolerance
-    return bad / n if n else 0.0
+    margins = [signed_distance(p, h) for p, h in zip(zmp, hulls) if len(h) >= 3]
+    return float(np.mean(np.asarray(margins) < -tolerance)) if margins else 0.0
 
 
 def _com_path(com: np.ndarray, target_zmp: np.ndarray, fps: float, regularisation: float) -> np.ndarray:
@@ -166,12 +116,6 @@ def _com_path(com: np.ndarray, target_zmp: np.ndarray, fps: float, regularisatio
                   1e3 * com[0, axis], 1e3 * com[-1, axis]]
         out[:, axis] = spsolve((M.T @ M).tocsc(), M.T @ b)
     return out
-
-
-def _heading(qpos: np.ndarray) -> np.ndarray:
-    """Base yaw [T] (rad) from the free joint's quaternion (wxyz)."""
-    w, x, y, z = qpos[:, 3:7].T
-    return np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
 
 
 def _leg_dofs(index) -> list:
@@ -240,11 +184,11 @@ def shift_com(index, qpos: np.ndarray, fps: float, contacts: np.ndarray, margin_
     hulls = _support(corners, contacts)
     zmp = cart_table_zmp(com, fps)
     before = _outside_fraction(zmp, hulls, tolerance_m)
-    target = np.array([_nearest_in(p, _shrink(h, margin_m)) if len(h) >= 3 else p for p, h in zip(zmp, hulls)])
+    target = np.array([nearest_point(p, _shrink(h, margin_m)) if len(h) >= 3 else p for p, h in zip(zmp, hulls)])
     path = _com_path(com, target, fps, regularisation)
     if axes == "lateral":  # only across the walking direction (the heading of each frame)
-        heading = _heading(qpos)
-        side = np.stack([-np.sin(heading), np.cos(heading)], axis=1)
+        yaw = heading(qpos)
+        side = np.stack([-np.sin(yaw), np.cos(yaw)], axis=1)
         change = ((path - com[:, :2]) * side).sum(axis=1, keepdims=True)
         path = com[:, :2] + change * side
     legs = _leg_dofs(index)

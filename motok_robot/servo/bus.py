@@ -517,18 +517,13 @@ class DynamixelBus(ServoBus):
 
 class _StatusKeeping:
     """Mixin for the SDK's group reads: keeps each device's status error byte and the failing ID.
-    Subclasses say how long each device's reply is and where its data goes."""
+    The class it is mixed into defines ``_reply_length(device_id)`` (bytes of that device's
+    reply) and ``_store(device_id, data)`` (where the data goes)."""
 
     def __init__(self, *args):
         super().__init__(*args)
         self.errors: dict[int, int] = {}
         self.failed_id: int | None = None
-
-    def _reply_length(self, device_id: int) -> int:
-        raise NotImplementedError
-
-    def _store(self, device_id: int, data) -> None:
-        raise NotImplementedError
 
     def rxPacket(self):  # noqa: N802 (SDK naming)
         self.last_result = False

@@ -21,11 +21,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-
-def heading(qpos: np.ndarray) -> np.ndarray:
-    """Root yaw [T] (rad) of ``qpos`` [T, nq] (free-joint quaternion wxyz)."""
-    w, x, y, z = qpos[:, 3:7].T
-    return np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+from motok_robot.feasibility.geometry import heading
 
 
 def _body_positions_in_heading_frame(index, qpos: np.ndarray) -> np.ndarray:

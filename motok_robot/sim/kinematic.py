@@ -28,7 +28,7 @@ import numpy as np
 from motok_robot.sim.config import ValidationConfig
 from motok_robot.feasibility.dynamics import (ContactDistributor, finite_difference, moving_average, qvel_qacc,
                                       zmp_from_centroidal)
-from motok_robot.sim.geometry import convex_hull, signed_distance
+from motok_robot.feasibility.geometry import convex_hull, signed_distance
 from motok_robot.robots.index import RobotIndex, body_pairs_in_collision
 
 

@@ -46,7 +46,7 @@ from motok_robot.feasibility.physics import ServoPhysics
 from motok_robot.feasibility.physics import servo_model as physics_servo_model
 from motok_robot.robots.index import RobotIndex
 from motok_robot.sim.config import ValidationConfig
-from motok_robot.sim.geometry import convex_hull, signed_distance
+from motok_robot.feasibility.geometry import convex_hull, signed_distance
 
 
 @dataclass

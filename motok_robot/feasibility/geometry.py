@@ -1,6 +1,7 @@
-"""Planar geometry for support polygons (no dependencies beyond numpy).
+"""Planar geometry for support polygons, and the heading of a free base (numpy only).
 
-Points are ``[N, 2]`` arrays of ground-plane (x, y) coordinates in metres.
+Points are ``[N, 2]`` arrays of ground-plane (x, y) coordinates in metres.  Shared by the
+feasibility stage (its CoM path) and validation (support polygons, CoP, fidelity).
 """
 
 from __future__ import annotations
@@ -35,11 +36,16 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
     return hull
 
 
-def _segment_distance(point: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+def _segment_point(point: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The point of segment ``a``-``b`` nearest to ``point``."""
     ab = b - a
     denom = float(ab @ ab)
     t = 0.0 if denom == 0.0 else float(np.clip((point - a) @ ab / denom, 0.0, 1.0))
-    return float(np.linalg.norm(point - (a + t * ab)))
+    return a + t * ab
+
+
+def _segment_distance(point: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.linalg.norm(point - _segment_point(point, a, b)))
 
 
 def signed_distance(point: np.ndarray, hull: np.ndarray) -> float:
@@ -65,3 +71,23 @@ def signed_distance(point: np.ndarray, hull: np.ndarray) -> float:
     if np.all(inside_dist >= 0.0):
         return float(inside_dist.min())
     return -min(_segment_distance(point, hull[i], hull[(i + 1) % n]) for i in range(n))
+
+
+def nearest_point(point: np.ndarray, hull: np.ndarray) -> np.ndarray:
+    """``point`` [2] itself when it lies in the convex polygon ``hull`` [H, 2] (CCW), else the
+    nearest point of the polygon's boundary (of the segment or point a degenerate hull is)."""
+    point = np.asarray(point, dtype=np.float64)
+    n = len(hull)
+    if n == 1:
+        return np.asarray(hull[0], dtype=np.float64)
+    if n >= 3 and signed_distance(point, hull) >= 0.0:
+        return point
+    edges = [(hull[i], hull[(i + 1) % n]) for i in range(n if n >= 3 else 1)]
+    candidates = [_segment_point(point, a, b) for a, b in edges]
+    return min(candidates, key=lambda q: float(((point - q) ** 2).sum()))
+
+
+def heading(qpos: np.ndarray) -> np.ndarray:
+    """Base yaw [T] (rad) of ``qpos`` [T, nq] (free-joint quaternion wxyz at columns 3-6)."""
+    w, x, y, z = np.asarray(qpos)[:, 3:7].T
+    return np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
