@@ -80,17 +80,18 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
     timing["kinematic"] = time.perf_counter() - start
     if physics:
         start = time.perf_counter()
-        stiffness, damping = servo_gains(servo_model(index, config)[0], index)
-        if not config.servo_feedforward:
-            stiffness = np.zeros_like(stiffness)  # the reference angles (still within the servo's limits)
-        goals = feedforward_goals(index, kin.joint_pos, kin.joint_vel, kin.torque, trajectory.fps, stiffness, damping,
-                                  config.servo_goal_velocity_fraction)
-        if servo_goals is not None and servo_goals["goals"].shape != goals.shape:
-            raise InputError(f"{trajectory.source or 'trajectory'}: the servo goals have shape "
-                             f"{servo_goals['goals'].shape}, the trajectory needs {goals.shape}")
         if servo_goals is not None:  # the goals and controller plan the feasibility stage made
+            expected = (trajectory.num_frames, index.nj)
+            if servo_goals["goals"].shape != expected:
+                raise InputError(f"{trajectory.source or 'trajectory'}: the servo goals have shape "
+                                 f"{servo_goals['goals'].shape}, the trajectory needs {expected}")
             goals, plan = servo_goals["goals"], servo_goals.get("plan")
         else:
+            stiffness, damping = servo_gains(servo_model(index, config)[0], index)
+            if not config.servo_feedforward:
+                stiffness = np.zeros_like(stiffness)  # the reference angles (still within the servo's limits)
+            goals = feedforward_goals(index, kin.joint_pos, kin.joint_vel, kin.torque, trajectory.fps, stiffness,
+                                      damping, config.servo_goal_velocity_fraction)
             balance = balance if balance is not None else BalanceConfig()
             if balance.enabled:
                 plan = build_plan(index, trajectory.qpos, trajectory.fps, kin.contact, balance)
