@@ -8,7 +8,9 @@
 * ``feet.png``: per foot, lowest sole height (m) and horizontal sole speed (m/s) over time,
   contact frames shaded, skating frames in red, thresholds dashed;
 * ``joints.png``: every joint's angle (rad) against its range (grey band = allowed), the
-  simulated angle when physics ran, samples beyond the range in red;
+  simulated angle when physics ran, samples beyond the range by more than the ``joint_limits``
+  check's tolerance in red (what that check counts), joints parked at a limit (the report's
+  notes) titled in orange;
 * ``torques.png``: every joint's required torque (N m) against +-its actuator force limit.
 """
 
@@ -18,6 +20,8 @@ import math
 from pathlib import Path
 
 import numpy as np
+
+from motok_robot.sim.notes import PARKED_FRACTION
 
 
 def _pyplot():
@@ -141,6 +145,7 @@ def _joint_grid(n: int, plt):
 
 def plot_joints(result, path: Path, plt) -> Path:
     kin, roll, index = result.kinematic, result.rollout, result.index
+    tolerance = float(result.report["config"]["joint_limit_tolerance_rad"])
     fig, axes = _joint_grid(index.nj, plt)
     for j, name in enumerate(index.joint_names):
         ax = axes.flat[j]
@@ -151,17 +156,23 @@ def plot_joints(result, path: Path, plt) -> Path:
         ax.plot(kin.time, kin.joint_pos[:, j], color="tab:blue", lw=1.2, label="reference")
         if roll is not None:
             ax.plot(kin.time, roll.qpos[:, index.qpos_adr[j]], color="tab:orange", lw=1.0, label="physics")
-        bad = (kin.joint_pos[:, j] < low) | (kin.joint_pos[:, j] > high)
+        # beyond the range by more than the joint_limits check's tolerance: what that check counts
+        bad = (kin.joint_pos[:, j] < low - tolerance) | (kin.joint_pos[:, j] > high + tolerance)
         if bad.any():
             ax.scatter(kin.time[bad], kin.joint_pos[bad, j], s=8, color="red", zorder=5)
         vel_bad = np.abs(kin.joint_vel[:, j]) > index.velocity_limit[j]
         if vel_bad.any():
             ax.scatter(kin.time[vel_bad], kin.joint_pos[vel_bad, j], s=8, marker="^", color="magenta", zorder=5)
-        ax.set_title(name, fontsize=8)
+        entry = result.report.get("per_joint", {}).get(name, {})
+        at_limit = entry.get("at_limit_ratio") or 0.0
+        parked = at_limit > PARKED_FRACTION
+        ax.set_title(name + (f" (at {entry['at_limit']} limit {at_limit:.0%})" if parked else ""), fontsize=8,
+                     color="darkorange" if parked else "black")
         ax.tick_params(labelsize=7)
     axes.flat[0].legend(fontsize=6, loc="best")
-    fig.suptitle(_title(result, "joint angles (rad) vs range; red: beyond range, magenta: over velocity limit"),
-                 fontsize=9)
+    fig.suptitle(_title(result, f"joint angles (rad) vs range; red: beyond range by more than {tolerance:g} rad "
+                                "(the joint_limits check), magenta: over velocity limit, orange title: parked at a "
+                                "limit"), fontsize=9)
     fig.subplots_adjust(left=0.05, right=0.99, bottom=0.06, top=0.9, hspace=0.45, wspace=0.25)
     fig.savefig(path, dpi=90)
     plt.close(fig)

@@ -41,7 +41,8 @@ Schema (``"schema": "motok-robot/validation-report/1"``)::
                "details": {...}}             # check-specific (worst joint, foot, pairs ...)
       },
       "per_foot":  {"left": {...}, "right": {...}},  # contact_frames, skate_ratio, skate_distance_m, ...
-      "per_joint": {JOINT: {...}},           # range, max_velocity_ratio, max_torque_ratio, ...
+      "per_joint": {JOINT: {...}},           # range, max_velocity_ratio, max_torque_ratio, at_limit_ratio ...
+      "notes":   [str, ...],                 # joints parked at a limit (motok_robot.sim.notes); not a failure
       "config":  {...},                      # the ValidationConfig used (all thresholds)
       "timing_s": {"kinematic": s, "physics": s, "plots": s, "render": s},
       "outputs": {"report": path, "plots": [path, ...], "video": path|null},
@@ -70,6 +71,7 @@ import numpy as np
 
 from motok_robot.sim.config import ValidationConfig
 from motok_robot.sim.kinematic import KinematicResult
+from motok_robot.sim.notes import at_limit_fields
 from motok_robot.robots.index import SIDES, RobotIndex
 from motok_robot.sim.rollout import RolloutResult
 
@@ -311,7 +313,8 @@ def build_checks(index: RobotIndex, kin: KinematicResult, roll: RolloutResult | 
         entry = {"range_rad": index.joint_range[j].tolist(), "velocity_limit_radps": float(index.velocity_limit[j]),
                  "torque_limit_nm": float(index.torque_limit[j]), "limit_violations": int(violating[:, j].sum()),
                  "max_velocity_ratio": float(vel_ratio[:, j].max()), "max_torque_ratio": float(torque_ratio[:, j].max()),
-                 "max_acceleration_radps2": float(acc[:, j].max())}
+                 "max_acceleration_radps2": float(acc[:, j].max()),
+                 **at_limit_fields(kin.joint_pos[:, j], low[j], high[j], c.joint_limit_tolerance_rad)}
         if roll is not None:
             entry["tracking_rmse_rad"] = float(roll.tracking_rmse_per_joint[j])
         per_joint[name] = entry
@@ -365,6 +368,7 @@ def summary_text(report: dict) -> str:
         frames = frame_ranges(ch["frames"])
         lines.append(f"  FAILED {key}: {_format_value(ch)} (must be {ch['comparison']} {_format_value(ch, 'threshold')}){extra}"
                      + (f"; frames {frames}" if frames else ""))
+    lines += [f"  note: {note}" for note in report.get("notes") or []]
     return "\n".join(lines)
 
 

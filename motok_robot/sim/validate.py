@@ -23,6 +23,7 @@ from motok_robot.robots.index import RobotIndex, index_robot
 from motok_robot.sim.config import ValidationConfig
 from motok_robot.sim.fidelity import fidelity_measures
 from motok_robot.sim.kinematic import KinematicResult, replay
+from motok_robot.sim.notes import joint_limit_notes
 from motok_robot.sim.report import SCHEMA, build_checks, robot_description_record, summary_text, write_report
 from motok_robot.sim.rollout import RolloutResult, servo_model, simulate
 from motok_robot.sim.trajectory import RobotTrajectory, check_matches_robot, load_robot_npz
@@ -107,7 +108,9 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
         "input": {"path": trajectory.source, "frames": trajectory.num_frames, "fps": trajectory.fps,
                   "duration_s": trajectory.duration_s, "sha256": input_sha256},
         "physics": physics, "metrics": metrics, "checks": {c.name: c.to_dict() for c in checks},
-        "per_foot": per_foot, "per_joint": per_joint, "config": config.to_dict(), "timing_s": timing,
+        "per_foot": per_foot, "per_joint": per_joint,
+        "notes": joint_limit_notes(per_joint, config.joint_limit_tolerance_rad),
+        "config": config.to_dict(), "timing_s": timing,
         "outputs": {"report": None, "plots": [], "video": None},
         "servo_goals": None if goals is None else {
             "mode": servo_goals["mode"] if servo_goals is not None else
