@@ -174,7 +174,7 @@ def test_limits_can_be_raised_by_env_and_option(tmp_path, robot, monkeypatch, ca
     npz = robot_npz(tmp_path / "robot.npz", robot, frames=8)
     with pytest.raises(InputError, match=r"field 'qpos' frames is 8 frames, above the limit of 5"):
         load_trajectory(npz, ServoMap.from_specs(robot.servos))
-    assert main(["--limit", "frames=10", "play", str(npz), "--dry-run", "--force", "--ramp", "0.05",
+    assert main(["--limit", "frames=10", "play", str(npz), "--dry-run", "--force", "--joint-angles", "--ramp", "0.05",
                  "--log", str(tmp_path / "p.csv")]) == 0
     capsys.readouterr()
     assert main(["--limit", "bogus=1", "play", str(npz), "--dry-run"]) == 2

@@ -109,7 +109,7 @@ def test_report_must_bind_the_description_digest(tmp_path, robot, capsys):
     assert main(["play", str(npz), "--dry-run", "--ramp", "0.1"]) == 2
     assert "another robot description" in one_line_error(capsys)
     hand_written_report(tmp_path, npz, description_sha256=robot.description_sha256)
-    assert main(["play", str(npz), "--dry-run", "--ramp", "0.1"]) == 0
+    assert main(["play", str(npz), "--dry-run", "--ramp", "0.1", "--joint-angles"]) == 0  # it records no goals
     capsys.readouterr()
     # an explicit description path on the command line is the user's choice, and is checked
     # against the report too: a calibrated copy is a different description
@@ -145,7 +145,7 @@ def test_forced_play_of_the_widened_setup_stays_in_the_installed_limits(tmp_path
     """With ``--force`` the file still cannot choose limits: the installed robot's apply."""
     npz = knee_clip(tmp_path, robot, "op3_like")
     log = tmp_path / "play.csv"
-    assert main(["play", str(npz), "--dry-run", "--force", "--ramp", "0.1", "--log", str(log)]) == 0
+    assert main(["play", str(npz), "--dry-run", "--force", "--joint-angles", "--ramp", "0.1", "--log", str(log)]) == 0
     assert read_log(log)["cmd_l_knee_ticks"].max() <= 3613
 
 

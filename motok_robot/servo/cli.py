@@ -10,8 +10,10 @@ from pathlib import Path
 def register(commands, groups) -> None:
     play = commands.add_parser(
         "play", help="stream a validated robot.npz to Dynamixel servos (or an emulated chain / the simulator)",
-        description="Stream robot.npz to the servos at a fixed rate: report gate, pre-flight, ramp to frame 0, "
-                    "clamped streaming, safe stop. Exits non-zero with one line naming the servo on a fault.")
+        description="Stream the validated servo goals of robot.npz to the servos at a fixed rate: report gate (the "
+                    "report beside robot.npz, the one `validate ROBOT.npz --out DIR` wrote in a folder below, or "
+                    "--report), pre-flight, ramp to frame 0, clamped streaming, safe stop. Exits non-zero with one "
+                    "line naming the servo on a fault.")
     play.add_argument("trajectory", help="robot.npz (retargeting output)")
     play.add_argument("--robot", help="robot name or PATH/NAME.toml (default: the installed robot that the 'robot' "
                                       "field of robot.npz names; a path there is refused)")
@@ -22,8 +24,15 @@ def register(commands, groups) -> None:
     mode.add_argument("--dry-run", action="store_true", help="play to an emulated servo chain (no hardware)")
     mode.add_argument("--sim", action="store_true", help="play on the MuJoCo model in real time (no hardware)")
     play.add_argument("--log", help="CSV log (default: <trajectory>.playback.csv next to robot.npz)")
-    play.add_argument("--report", help="validation report (default: report.json next to robot.npz)")
-    play.add_argument("--force", action="store_true", help="play without a passing validation report (warns)")
+    play.add_argument("--report", help="validation report (default: report.json next to robot.npz, else the "
+                                       "report.json in a folder below robot.npz's folder or the current one that "
+                                       "validated this file's content, as `validate ROBOT.npz --out DIR` leaves it)")
+    play.add_argument("--force", action="store_true",
+                      help="play without a passing validation report (warns); still streams the servo goals the "
+                           "report recorded")
+    play.add_argument("--joint-angles", action="store_true",
+                      help="when no validated servo goals exist for the file (no report, or validated without "
+                           "physics), stream its raw joint angles instead of refusing (warns)")
     play.add_argument("--ramp", type=float, default=None, help="seconds to ramp from the present pose to frame 0 (2)")
     play.add_argument("--retries", type=int, default=None, help="consecutive failed ticks tolerated (3)")
     play.add_argument("--torque-off-on-stop", action="store_true",
@@ -75,6 +84,117 @@ def _robot_name_from_npz(path: Path) -> str | None:
     return str(value.reshape(()).item()) if value.size == 1 else repr(value.tolist())[:80]
 
 
+#: a report.json below these many folder levels of robot.npz's folder / the current folder is not looked for
+REPORT_SEARCH_DEPTH = 3
+#: folders visited at most while looking for the report (a bound when the current folder is large)
+REPORT_SEARCH_FOLDERS = 5000
+#: report files larger than this are not read while searching (a validation report is tens of kB)
+REPORT_SEARCH_MAX_BYTES = 16 * 2**20
+
+
+def _read_report(path: Path) -> dict | None:
+    import json
+
+    try:
+        if path.stat().st_size > REPORT_SEARCH_MAX_BYTES:
+            return None
+        report = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return report if isinstance(report, dict) else None
+
+
+def _validated_digest(report: dict | None) -> str | None:
+    record = report.get("input") if isinstance(report, dict) else None
+    digest = record.get("sha256") if isinstance(record, dict) else None
+    return digest.lower() if isinstance(digest, str) and digest else None
+
+
+def _reports_below(root: Path, skip: Path):
+    """report.json files at most REPORT_SEARCH_DEPTH levels below ``root`` (hidden folders
+    skipped), at most REPORT_SEARCH_FOLDERS folders visited."""
+    import os
+
+    visited = 0
+    base = len(root.parts)
+    for here, dirs, files in os.walk(root):
+        visited += 1
+        if visited > REPORT_SEARCH_FOLDERS:
+            return
+        depth = len(Path(here).parts) - base
+        dirs[:] = sorted(d for d in dirs if not d.startswith(".")) if depth < REPORT_SEARCH_DEPTH else []
+        if "report.json" in files:
+            candidate = Path(here) / "report.json"
+            if candidate.resolve() != skip:
+                yield candidate
+
+
+def find_validation_report(trajectory: Path, report: str | None = None,
+                           roots: tuple[Path, ...] | None = None) -> tuple[Path | None, str]:
+    """The validation report for ``trajectory`` and a line saying how it was found.
+
+    ``report`` (``--report``) wins.  Else ``report.json`` beside the trajectory when it validated
+    this content (or records no digest: the gate then matches by name); else a ``report.json``
+    at most :data:`REPORT_SEARCH_DEPTH` folders below the trajectory's folder or the current
+    folder (``roots``) whose ``input.sha256`` is the trajectory's, as ``validate ROBOT.npz
+    --out DIR`` leaves it (a passing one first, then the newest); else the report beside it
+    when there is one (the gate explains why it does not fit), else None and why.
+    """
+    from motok_robot.servo.streamer import _sha256
+
+    if report:
+        return Path(report), ""
+    trajectory = Path(trajectory)
+    beside = trajectory.with_name("report.json")
+    digest = _sha256(trajectory)
+    beside_report = _read_report(beside) if beside.is_file() else None
+    if beside_report is not None and _validated_digest(beside_report) in (digest, None):
+        return beside, ""
+    matches = []
+    seen: set[Path] = set()
+    roots = tuple(dict.fromkeys(Path(r).resolve() for r in (roots or (trajectory.parent, Path.cwd()))))
+    for root in roots:
+        for candidate in _reports_below(root, beside.resolve()):
+            if candidate.resolve() in seen:
+                continue
+            seen.add(candidate.resolve())
+            found = _read_report(candidate)
+            if _validated_digest(found) == digest:
+                matches.append((found.get("passed") is True, candidate.stat().st_mtime, candidate))
+    if matches:
+        matches.sort(key=lambda m: (m[0], m[1]))
+        chosen = matches[-1][2]
+        return chosen, f"validation report: {chosen} (it validated this file's content, sha256 {digest[:12]}...)"
+    if beside.is_file():
+        return beside, ""
+    places = " and ".join(str(r) for r in roots)
+    return None, (f"no validation report at {beside}, and no report.json up to {REPORT_SEARCH_DEPTH} folders "
+                  f"below {places} validated its content (sha256 {digest[:12]}...)")
+
+
+def missing_goals_reason(trajectory: Path, report_path: Path | None, description_sha256: str) -> str:
+    """Why playback has no validated servo goals for ``trajectory`` (one phrase)."""
+    from motok_robot.servo.streamer import _sha256
+
+    if report_path is None or not Path(report_path).is_file():
+        return "no validation report"
+    report = _read_report(Path(report_path))
+    if report is None:
+        return f"{report_path} is unreadable"
+    validated = _validated_digest(report)
+    if validated is None:
+        return f"{report_path} records no sha256 of the file it validated"
+    if validated != _sha256(Path(trajectory)):
+        return f"{report_path} validated other content"
+    record = report.get("servo_goals")
+    if not isinstance(record, dict) or not record.get("file"):
+        return f"{report_path} records no servo goals (validated without physics)"
+    description = report.get("robot_description")
+    if not isinstance(description, dict) or str(description.get("sha256", "")).lower() != description_sha256.lower():
+        return f"{report_path} was made with another robot description"
+    return f"{report_path}'s servo goals were not loaded"
+
+
 def _play(args: argparse.Namespace) -> int:
     import warnings
 
@@ -121,12 +241,17 @@ def _play_inner(args: argparse.Namespace) -> int:
         raise InputError("--render needs --sim")
     robot = load(robot_name)
     digest = robot.description_sha256
-    check_validation_report(path, args.report, force=args.force, robot_name=robot.name, robot_sha256=digest)
+    report_path, found_note = find_validation_report(path, args.report)
+    if report_path is None and not args.force:
+        raise InputError(f"{path}: refusing to play: {found_note}. Validate it first (motok-robot validate {path} "
+                         "--out DIR), pass --report DIR/report.json, or --force to play an unvalidated trajectory")
+    if found_note and report_path is not None:
+        print(found_note)
+    check_validation_report(path, report_path, force=args.force, robot_name=robot.name, robot_sha256=digest)
     servo_map = ServoMap.from_specs(robot.servos)
-    trajectory = load_trajectory(path, servo_map, robot.name, args.report, robot_sha256=digest)
-    print({"feedforward": "streaming the validated feedforward servo goals (servo_goals.npz)",
-           "feasibility": "streaming the feasibility stage's validated servo goals (servo_goals.npz)"}.get(
-        trajectory.goals, "streaming the joint angles of the trajectory (no validated servo goals for this file)"))
+    trajectory = load_trajectory(path, servo_map, robot.name, report_path, robot_sha256=digest)
+    # load_trajectory fills plan_joints exactly when it took the report's servo_goals.npz
+    streams_goals = bool(trajectory.plan_joints)
     if trajectory.plan is not None:
         print("validated closed loop: " + ("playing it OPEN LOOP (--no-balance)" if args.no_balance else
                                            "the balance controller runs on the torso IMU"))
@@ -147,6 +272,24 @@ def _play_inner(args: argparse.Namespace) -> int:
         balance=not args.no_balance,
     )
     imu = ImuMount.from_spec(bus_spec.imu) if bus_spec is not None and bus_spec.imu is not None else None
+    if not streams_goals:
+        why = missing_goals_reason(path, report_path, digest)
+        if not args.joint_angles:
+            raise InputError(f"{path}: refusing to play: no validated servo goals for it ({why}); play streams only "
+                             "the servo goals validation checked. Validate it with physics (motok-robot validate "
+                             f"{path} --out DIR) or pass --joint-angles to stream its raw joint angles")
+        import warnings
+
+        from motok_robot.servo.streamer import PlaybackWarning
+
+        warnings.warn(f"{path}: streaming the RAW JOINT ANGLES because of --joint-angles ({why}): not what "
+                      "validation's physics rollout checked", PlaybackWarning, stacklevel=2)
+    else:
+        print({"feedforward": "streaming the validated feedforward servo goals",
+               "feasibility": "streaming the feasibility stage's validated servo goals",
+               "reference": "streaming the validated servo goals (reference mode: the joint angles, no feedforward)"}
+              .get(trajectory.goals, f"streaming the validated servo goals ({trajectory.goals})")
+              + f" of {report_path}")
     log_path = Path(args.log) if args.log else path.with_name(path.stem + ".playback.csv")
     rig = None
     if args.sim:
