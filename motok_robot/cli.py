@@ -42,6 +42,7 @@ REGISTRARS = (
     "motok_robot.feasibility.cli",
     "motok_robot.sim.cli",
     "motok_robot.servo.cli",
+    "motok_robot.export.cli",
     "motok_robot.eval.cli",
 )
 
