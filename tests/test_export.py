@@ -248,6 +248,11 @@ def test_lerobot_refuses_mixed_robots_and_empty_trees(tmp_path, capsys):
     (tmp_path / "empty").mkdir()
     assert main(["export", str(tmp_path / "empty"), "--lerobot", str(tmp_path / "ds2")]) == 2
     assert "no passing trajectory" in one_line_error(capsys)
+    # a failed re-export leaves the previous dataset alone
+    capsys.readouterr()
+    assert main(["export", str(tmp_path), "--lerobot", str(tmp_path / "ds1"), "--overwrite"]) == 2
+    assert "different robots" in capsys.readouterr().err
+    assert (tmp_path / "ds1" / "meta" / "info.json").is_file()
 
 
 def test_progress_prints_lines_off_a_terminal():

@@ -149,12 +149,17 @@ def _validated_goals(table, report_arg):
 def _export_lerobot(args) -> int:
     from pathlib import Path
 
-    from motok_robot.export.lerobot import find_episodes, parquet_available, write_dataset
+    from motok_robot.errors import InputError
+    from motok_robot.export.lerobot import check_consistent, find_episodes, parquet_available, write_dataset
     from motok_robot.export.progress import Progress
 
     out = _check_output(args.lerobot, args.overwrite, folder=True)
     root = Path(args.input)
     scan = find_episodes(root, args.robot, progress=Progress("scan", "run folders"))
+    if not scan.episodes:
+        raise InputError(f"{root}: no passing trajectory to export ({len(scan.skipped)} run folder(s) skipped"
+                         + (f"; first: {scan.skipped[0][0]}: {scan.skipped[0][1]})" if scan.skipped else ")"))
+    check_consistent(scan.episodes, root)  # before an --overwrite removes the previous export
     if args.overwrite and out.is_dir():
         _clear_dataset(out)
     parquet = parquet_available() and not args.npz
