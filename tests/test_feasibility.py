@@ -170,3 +170,43 @@ def test_loading_the_cli_does_not_import_mujoco():
     code = ("import sys, motok_robot.cli, motok_robot.feasibility, motok_robot.feasibility.cli; "
             "assert 'mujoco' not in sys.modules, 'mujoco imported'")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_swing_feet_lift_off_and_land_vertically_with_clearance(op3):
+    from motok_robot.feasibility.swing import shape_swing, swing_phases
+    from motok_robot.feasibility.zmp_shift import _kinematics
+
+    assert swing_phases(np.array([1, 1, 0, 0, 0, 1, 0, 0], bool)) == [(2, 5)]  # the last one never lands
+    qpos = S.walk(op3, steps=2, step_period_s=2.0, fps=FPS)
+    contacts = sole_contacts(op3, qpos, 0.005)
+    result = shape_swing(op3, qpos, contacts, clearance_m=0.01, dwell=0.2)
+    assert result.phases >= 2 and result.foot_error_m < 0.002
+    _, _, before, _ = _kinematics(op3, qpos)
+    _, _, after, _ = _kinematics(op3, result.qpos)
+    planted = contacts  # planted frames keep their feet
+    assert np.abs(after[planted] - before[planted]).max() < 1e-6
+    side = 1 if swing_phases(contacts[:, 1]) else 0
+    a, b = swing_phases(contacts[:, side])[0]
+    mid = (a + b - 1) // 2
+    assert after[mid, side, 2] > before[mid, side, 2] + 0.008  # higher at mid-swing
+    first = a  # the first swing frame (dwell) stays over the lift-off spot
+    assert np.linalg.norm(after[first, side, :2] - before[a - 1, side, :2]) < 0.25 * np.linalg.norm(
+        before[first, side, :2] - before[a - 1, side, :2]) + 1e-4
+
+
+def test_a_swing_leg_is_turned_against_the_tilt_to_step_where_the_robot_falls(op3):
+    qpos = S.standing(op3, 1.0, FPS)
+    contacts = np.ones((qpos.shape[0], 2), bool)
+    contacts[:, 1] = False  # the right leg is in the air
+    gains = {"hip_roll": 1.5, "ankle_roll": -0.5}
+    plan = build_plan(op3, qpos, FPS, contacts, BalanceConfig(tilt_gain={}, rate_gain={}, swing_tilt_gain=gains))
+    off = build_plan(op3, qpos, FPS, contacts, BalanceConfig(tilt_gain={}, rate_gain={}))
+    hip, ankle = op3.joint_names.index("r_hip_roll"), op3.joint_names.index("r_ank_roll")
+    stance = op3.joint_names.index("l_hip_roll")
+    assert np.abs(off.tilt_matrix).max() == 0.0
+    mid = qpos.shape[0] // 2
+    h, k = plan.tilt_matrix[mid, hip], plan.tilt_matrix[mid, ankle]
+    assert np.linalg.norm(h) > 1.0 and np.allclose(plan.tilt_matrix[mid, stance], 0.0)
+    assert float(h @ k) < 0.0  # the swing ankle turns the other way and keeps the foot level
+    with pytest.raises(InputError, match="swing_tilt_gain"):
+        BalanceConfig(swing_tilt_gain={"hip_roll": 50.0})
