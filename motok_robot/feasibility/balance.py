@@ -22,9 +22,7 @@ turns the torso back toward its reference attitude (the ankle strategy when the 
 it, the hip strategy with the hips), ``a_j`` with its vertical part removed, except for the hip
 yaw joints, which keep only their vertical part (yaw damping: the tilt error has no yaw part,
 and the IMU cannot observe heading), ``s_j`` = 1 while the leg's foot is in contact in the reference and
-``swing_share`` otherwise.  A leg in the air also gets ``-swing_tilt_gain`` (foot placement:
-a swing leg tilts with the torso when the robot falls, so turning it back by more than the
-tilt puts the foot down on the side the robot falls to, the stepping strategy).  Everything that depends on the reference (attitude, rate, axes,
+``swing_share`` otherwise.  Everything that depends on the reference (attitude, rate, axes,
 support) is precomputed per frame into a :class:`BalancePlan`; at run time the controller is a
 time-varying linear feedback plus the filter, cheap enough for a Python loop at 125 Hz and
 vectorised over a batch of rollouts (the physics refinement).
@@ -192,16 +190,14 @@ def build_plan(index, qpos: np.ndarray, fps: float, contacts: np.ndarray,
     weight = support_weights(contacts, fps, config.swing_share)  # [T, 2]
     kp = np.array([config.tilt_gain.get(r, 0.0) for r in ROLES] + [0.0])[role]
     kd = np.array([config.rate_gain.get(r, 0.0) for r in ROLES] + [0.0])[role]
-    kp_swing = np.array([config.swing_tilt_gain.get(r, 0.0) for r in ROLES] + [0.0])[role]
     s = np.where(side[None, :] >= 0, weight[:, np.maximum(side, 0)], 0.0)  # [T, nj]
-    in_air = np.where(side[None, :] >= 0, 1.0 - support_weights(contacts, fps, 0.0)[:, np.maximum(side, 0)], 0.0)
     # tilt acts through each joint's horizontal axis part, yaw through a hip yaw's vertical part
     used = axes.copy()
     yaw = role == ROLES.index("hip_yaw")
     used[:, ~yaw, 2] = 0.0
     used[:, yaw, :2] = 0.0
     in_imu = np.einsum("tkn,tjk->tjn", rot, used)  # R^T a_j per joint: [T, nj, 3]
-    tilt_matrix = (s * kp - in_air * kp_swing)[:, :, None] * in_imu
+    tilt_matrix = (s * kp)[:, :, None] * in_imu
     rate_matrix = (s * kd)[:, :, None] * in_imu
     return BalancePlan(fps=float(fps), down=down, rate=rate, tilt_matrix=tilt_matrix, rate_matrix=rate_matrix,
                        config=config)

@@ -19,10 +19,6 @@ from motok_robot.errors import InputError
 ROLES = ("ankle_pitch", "ankle_roll", "knee", "hip_pitch", "hip_roll", "hip_yaw")
 
 
-def _no_gain() -> dict:
-    return {role: 0.0 for role in ROLES}
-
-
 def _default_tilt_gain() -> dict:
     # no attitude (P) feedback by default: on op3_like every tilt gain tried (ankle +-1 and 2,
     # hip +-1 rad/rad) lowered the push a standing robot survives, with or without gyro damping
@@ -53,12 +49,6 @@ class BalanceConfig:
     rate_gain: dict = field(default_factory=_default_rate_gain)
     #: share of the correction a leg gets while it is not in support (1 = as a stance leg)
     swing_share: float = 0.0
-    #: foot placement (the stepping strategy): a leg that is NOT in support turns by
-    #: ``-gain x tilt error`` relative to the torso, per joint role (rad/rad).  The torso and a
-    #: swing leg tilt together when the robot falls, so gain 1 on the hip joints keeps the swing
-    #: leg's world direction and more puts the foot down on the side the robot falls to; the
-    #: swing ankles with ``1 - hip gain`` keep that foot level
-    swing_tilt_gain: dict = field(default_factory=_no_gain)
     #: per-tick weight of the accelerometer in the tilt estimate (complementary filter; 0.02
     #: at 125 Hz is a 0.4 s time constant: the gyro carries the fast part)
     accel_weight: float = 0.02
@@ -68,7 +58,7 @@ class BalanceConfig:
     max_offset_rad: float = 0.35
 
     def __post_init__(self):
-        for name in ("tilt_gain", "rate_gain", "swing_tilt_gain"):
+        for name in ("tilt_gain", "rate_gain"):
             gains = getattr(self, name)
             unknown = sorted(set(gains) - set(ROLES))
             if unknown:
@@ -159,10 +149,6 @@ class FeasibilityConfig:
     zmp_margin_m: float = 0.01
     #: "lateral": the CoM only moves across the walking direction; "both": also along it
     zmp_axes: str = "lateral"
-    #: swing feet (:mod:`.swing`): added height at mid-swing (m; 0 = keep the reference's
-    #: swing paths) and the share of each swing spent over the lift-off and landing spots
-    swing_clearance_m: float = 0.0
-    swing_dwell: float = 0.2
     #: run the predictive-sampling refinement of the goals (:mod:`.refine`)
     refine: bool = False
     #: physics timestep (s): the validation rollout's (ValidationConfig.physics_timestep_s)
@@ -180,10 +166,6 @@ class FeasibilityConfig:
             raise InputError(f"feasibility retime = {self.retime}: must lie in [1, 4] (times slower)")
         if self.zmp_axes not in ("lateral", "both"):
             raise InputError(f"feasibility zmp_axes = {self.zmp_axes!r}: use lateral or both")
-        if not 0.0 <= float(self.swing_clearance_m) <= 0.1:
-            raise InputError(f"feasibility swing_clearance_m = {self.swing_clearance_m}: must lie in [0, 0.1] m")
-        if not 0.0 <= float(self.swing_dwell) < 0.5:
-            raise InputError(f"feasibility swing_dwell = {self.swing_dwell}: must lie in [0, 0.5)")
         if not 0.0 <= float(self.zmp_margin_m) <= 0.05:
             raise InputError(f"feasibility zmp_margin_m = {self.zmp_margin_m}: must lie in [0, 0.05] m")
 

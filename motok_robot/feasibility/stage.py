@@ -3,12 +3,11 @@
 Steps (each recorded in the output's ``feasibility`` field and ``feasibility.json``):
 
 1. optional uniform slow-down (``retime``; the time warp the fidelity checks see);
-2. optional swing feet that lift off and land vertically with clearance (:mod:`.swing`);
-3. a CoM path whose cart-table ZMP stays on the planned feet (:mod:`.zmp_shift`);
-4. servo goals with inverse-dynamics feedforward (:mod:`.feedforward`) of that task;
-5. the balance controller's plan (:mod:`.balance`), which validation and playback run;
-6. optional predictive-sampling refinement of the goals over physics rollouts (:mod:`.refine`);
-7. the rollout of the goals from rest with the controller in the loop: ``qpos`` of the output.
+2. a CoM path whose cart-table ZMP stays on the planned feet (:mod:`.zmp_shift`);
+3. servo goals with inverse-dynamics feedforward (:mod:`.feedforward`) of that task;
+4. the balance controller's plan (:mod:`.balance`), which validation and playback run;
+5. optional predictive-sampling refinement of the goals over physics rollouts (:mod:`.refine`);
+6. the rollout of the goals from rest with the controller in the loop: ``qpos`` of the output.
 
 Output ``robot.npz`` keeps retargeting's fields, with ``qpos`` = the executed trajectory,
 ``reference_qpos`` = the kinematic trajectory it was asked to do (after the slow-down), which
@@ -35,7 +34,6 @@ from motok_robot.feasibility.dynamics import required_torque
 from motok_robot.feasibility.feedforward import GOALS_FILE, feedforward_goals, save_servo_goals, servo_gains
 from motok_robot.feasibility.physics import execute, servo_model
 from motok_robot.feasibility.refine import refine_goals
-from motok_robot.feasibility.swing import shape_swing
 from motok_robot.feasibility.zmp_shift import shift_com
 
 RECORD_FILE = "feasibility.json"
@@ -81,12 +79,8 @@ def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, pr
     task = reference
     t0 = time.perf_counter()
     contacts = sole_contacts(index, reference, config.contact_height_m)
-    if config.swing_clearance_m > 0:
-        swing = shape_swing(index, task, contacts, config.swing_clearance_m, config.swing_dwell)
-        task = swing.qpos
-        record["swing"] = swing.record()
     if config.zmp_shift:
-        shifted = shift_com(index, task, fps, contacts, margin_m=config.zmp_margin_m, axes=config.zmp_axes)
+        shifted = shift_com(index, reference, fps, contacts, margin_m=config.zmp_margin_m, axes=config.zmp_axes)
         task = shifted.qpos
         record["zmp_shift"] = shifted.record()
     timing["zmp_shift"] = time.perf_counter() - t0
