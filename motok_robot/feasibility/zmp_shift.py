@@ -95,81 +95,27 @@ def _outside_fraction(zmp, hulls, tolerance) -> float:
     return float(np.mean(np.asarray(margins) < -tolerance)) if margins else 0.0
 
 
-def _half_planes(hull: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """Inward unit normals [H, 2] and offsets [H] of a CCW polygon shrunk by ``margin``:
-    ``normals @ p >= offsets`` holds for the points at least ``margin`` inside it."""
-    edges = np.roll(hull, -1, axis=0) - hull
-    lengths = np.maximum(np.linalg.norm(edges, axis=1, keepdims=True), 1e-12)
-    normals = np.stack([-edges[:, 1], edges[:, 0]], axis=1) / lengths
-    return normals, (normals * hull).sum(axis=1) + margin
-
-
-def _com_path(com: np.ndarray, hulls: list, fps: float, margin: float, basis: np.ndarray,
-              smoothness: float, slack_weight: float) -> np.ndarray:
-    """Horizontal CoM path [T, 2] closest to the reference ``com`` whose cart-table ZMP lies in
-    each frame's support polygon shrunk by ``margin`` (see the module docstring, step 2).
-
-    The change of frame ``t`` is ``basis[t] @ u_t`` (``basis`` [T, 2, r]: r = 1 moves the CoM
-    across the heading only, r = 2 in both directions).  A quadratic programme (OSQP through
-    CasADi): minimise ``sum |u_t|^2 + smoothness sum |second difference of the change|^2 +
-    slack_weight sum s_t^2`` subject to ``n . p_t >= offset - s_t`` for every edge of the
-    polygon of every interior support frame, ``s_t >= 0``, no change at the first and last frame.
-    The slack ``s_t`` (m) is how far frame ``t``'s ZMP stays outside where no path can do better.
-    """
-    import casadi as ca
-
-    T, r = com.shape[0], basis.shape[2]
+def _com_path(com: np.ndarray, target_zmp: np.ndarray, fps: float, regularisation: float) -> np.ndarray:
+    """Least-squares horizontal CoM path [T, 2] (see the module docstring, step 2)."""
+    T = com.shape[0]
     if T < 3:
         return com[:, :2].copy()
     k = com[:, 2] / GRAVITY * fps * fps
-    n_u = T * r
-    n = n_u + T  # u, then one slack per frame
-    # the change of the CoM: x = X @ u  (X: [2T, n_u], rows 2t, 2t+1)
-    rows = np.repeat(np.arange(2 * T), r)
-    cols = (np.arange(T)[:, None, None] * r + np.arange(r)[None, None, :]).repeat(2, axis=1).reshape(-1)
-    X = sparse.csr_matrix((basis.reshape(-1), (rows, cols)), shape=(2 * T, n_u))
-    # second difference of the change, and the ZMP change p = x - k (second difference)
-    D = sparse.diags([np.ones(T - 2), -2 * np.ones(T - 2), np.ones(T - 2)], [0, 1, 2], shape=(T - 2, T))
-    D2 = sparse.kron(D, sparse.identity(2)).tocsr()  # acts on the interleaved (x, y) vector
-    K = sparse.kron(sparse.diags(k[1:-1]), sparse.identity(2))
-    Sel = sparse.kron(sparse.eye(T - 2, T, k=1), sparse.identity(2))
-    P = ((Sel - K @ D2) @ X).tocsr()  # [2(T-2), n_u]: ZMP change of the interior frames
-    acc = D2 @ X
-    H = sparse.block_diag([sparse.identity(n_u) + smoothness * (acc.T @ acc),
-                           slack_weight * sparse.identity(T)]).tocsc()
-    zmp_ref = cart_table_zmp(com, fps)
-    A_rows, lower = [], []
-    for t in range(1, T - 1):
-        hull = hulls[t]
-        if len(hull) < 3:
-            continue
-        normals, offsets = _half_planes(hull, margin)
-        block = sparse.csr_matrix(normals) @ P[2 * (t - 1):2 * t]
-        slack = sparse.csr_matrix((np.ones(len(normals)), (np.arange(len(normals)), np.full(len(normals), n_u + t))),
-                                  shape=(len(normals), n))
-        A_rows.append(sparse.hstack([block, sparse.csr_matrix((len(normals), T))]) + slack)
-        lower.append(offsets - normals @ zmp_ref[t])
-    if not A_rows:
-        return com[:, :2].copy()
-    A = sparse.vstack(A_rows).tocsc()
-    lba = np.concatenate(lower)
-    lbx = np.r_[np.full(n_u, -np.inf), np.zeros(T)]
-    ubx = np.full(n, np.inf)
-    lbx[:r], ubx[:r] = 0.0, 0.0  # the first and last frames keep the reference CoM
-    lbx[n_u - r:n_u], ubx[n_u - r:n_u] = 0.0, 0.0
-
-    def dm(m):
-        m = m.tocsc()
-        return ca.DM(ca.Sparsity(m.shape[0], m.shape[1], m.indptr.tolist(), m.indices.tolist()), m.data.tolist())
-
-    Hd, Ad = dm(H), dm(A)
-    solver = ca.conic("com_path", "osqp", {"h": Hd.sparsity(), "a": Ad.sparsity()},
-                      {"osqp": {"verbose": False, "eps_abs": 1e-7, "eps_rel": 1e-7, "max_iter": 20000,
-                                "polish": True}, "error_on_fail": False})
-    sol = solver(h=Hd, g=np.zeros(n), a=Ad, lba=lba, uba=np.full(len(lba), np.inf), lbx=lbx, ubx=ubx)
-    u = np.asarray(sol["x"]).reshape(-1)[:n_u]
-    change = (X @ u).reshape(T, 2)
-    return com[:, :2] + change
+    rows = np.arange(1, T - 1)
+    # x_t - k_t (x_{t+1} - 2 x_t + x_{t-1}) for interior frames
+    A = sparse.diags([np.r_[0.0, -k[1:-1], 0.0][1:], np.r_[1.0, 1 + 2 * k[1:-1], 1.0], np.r_[0.0, -k[1:-1], 0.0][:-1]],
+                     [-1, 0, 1], shape=(T, T), format="csr")
+    A = A[rows]
+    R = sparse.identity(T, format="csr") * np.sqrt(regularisation)
+    # the first and last frames held at the reference (weight 1e3)
+    E = sparse.csr_matrix((np.full(2, 1e3), ([0, 1], [0, T - 1])), shape=(2, T))
+    M = sparse.vstack([A, R, E]).tocsr()
+    out = np.zeros((T, 2))
+    for axis in range(2):
+        b = np.r_[target_zmp[rows, axis], np.sqrt(regularisation) * com[:, axis],
+                  1e3 * com[0, axis], 1e3 * com[-1, axis]]
+        out[:, axis] = spsolve((M.T @ M).tocsc(), M.T @ b)
+    return out
 
 
 def _leg_dofs(index) -> list:
@@ -228,8 +174,8 @@ def _solve_legs(index, qpos_t: np.ndarray, foot_pos: np.ndarray, foot_quat: np.n
 
 
 def shift_com(index, qpos: np.ndarray, fps: float, contacts: np.ndarray, margin_m: float = 0.01,
-              tolerance_m: float = 0.005, passes: int = 2, axes: str = "lateral", smoothness: float = 1.0,
-              slack_weight: float = 1e4) -> ZmpShiftResult:
+              regularisation: float = 1e-3, tolerance_m: float = 0.005, passes: int = 2,
+              axes: str = "lateral") -> ZmpShiftResult:
     """The trajectory ``qpos`` [T, nq] with its CoM moved so the cart-table ZMP stays on the
     planned contacts ``contacts`` [T, 2] (see the module docstring)."""
     qpos = np.asarray(qpos, dtype=np.float64).copy()
@@ -238,13 +184,13 @@ def shift_com(index, qpos: np.ndarray, fps: float, contacts: np.ndarray, margin_
     hulls = _support(corners, contacts)
     zmp = cart_table_zmp(com, fps)
     before = _outside_fraction(zmp, hulls, tolerance_m)
-    T = qpos.shape[0]
+    target = np.array([nearest_point(p, _shrink(h, margin_m)) if len(h) >= 3 else p for p, h in zip(zmp, hulls)])
+    path = _com_path(com, target, fps, regularisation)
     if axes == "lateral":  # only across the walking direction (the heading of each frame)
         yaw = heading(qpos)
-        basis = np.stack([-np.sin(yaw), np.cos(yaw)], axis=1)[:, :, None]
-    else:
-        basis = np.repeat(np.eye(2)[None], T, axis=0)
-    path = _com_path(com, hulls, fps, margin_m, basis, smoothness, slack_weight)
+        side = np.stack([-np.sin(yaw), np.cos(yaw)], axis=1)
+        change = ((path - com[:, :2]) * side).sum(axis=1, keepdims=True)
+        path = com[:, :2] + change * side
     legs = _leg_dofs(index)
     data = mujoco.MjData(index.kin_model)
     worst = 0.0
