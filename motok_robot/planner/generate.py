@@ -29,6 +29,7 @@ from motok_robot.motion.skeleton import FPS
 from motok_robot.paths import models_dir
 from motok_robot.planner.config import PLANNER_KINDS, SampleConfig
 from motok_robot.text import validate
+from motok_robot.text.vocabulary import VocabularyCheck, check_prompt, vocabulary_for_planner, warn_if_far
 
 TRAIN_HINT = {
     "tokenizer": "motok-robot train tokenizer --data DIR --out {path}",
@@ -66,6 +67,9 @@ class GeneratedMotion:
         fps: frames per second (20).
         timings: seconds spent per stage (``text``, ``plan``, ``decode``, ``joints``).
         decoder_seed: the seed of the decoder's noise when it was not ``seed`` (None: ``seed``).
+        vocabulary: how near the prompt is to the planner's training captions
+            (:class:`~motok_robot.text.vocabulary.VocabularyCheck`; None when not checked: no text,
+            or no vocabulary file for this planner).
     """
 
     joints: np.ndarray
@@ -77,6 +81,7 @@ class GeneratedMotion:
     fps: int = FPS
     timings: dict[str, float] = field(default_factory=dict)
     decoder_seed: int | None = None
+    vocabulary: VocabularyCheck | None = None
 
     @property
     def seconds(self) -> float:
@@ -87,7 +92,8 @@ class GeneratedMotion:
         from motok_robot.planner.motion_file import save_motion
 
         return save_motion(path, self.joints, self.features, self.tokens, self.text, self.seed, self.model, self.fps,
-                           decoder_seed=self.decoder_seed)
+                           decoder_seed=self.decoder_seed,
+                           vocabulary_check=None if self.vocabulary is None else self.vocabulary.to_json())
 
 
 def check_text(text: str) -> str:
@@ -141,9 +147,33 @@ class MotionGenerator:
                              f"the planner expects {cfg.text_dim}")
         self.kind = cfg.kind
         tok_hash = file_digest((tok_path if tok_path.is_dir() else tok_path.parent) / "model.safetensors")
+        plan_hash = file_digest(plan_path / "model.safetensors")
         self.model_id = (f"tokenizer={tok_path.name}@{tok_hash[:12]};"
-                         f"planner={cfg.kind}:{plan_path.name}@{file_digest(plan_path / 'model.safetensors')[:12]};"
+                         f"planner={cfg.kind}:{plan_path.name}@{plan_hash[:12]};"
                          f"text={self.text_encoder.name}")
+        # the planner's training captions (models/vocabulary.json for the shipped planners); a
+        # prompt far from all of them is warned about and the check recorded in motion.npz
+        self.vocabulary, self.vocabulary_status = vocabulary_for_planner(plan_path, plan_hash)
+
+    def check_vocabulary(self, text: str, embedding=None) -> VocabularyCheck | None:
+        """How near ``text`` is to the planner's training captions (None without a vocabulary, or
+        when its text encoder cannot be loaded: then ``vocabulary_status`` says why).
+        ``embedding``: the prompt's embedding by the planner's text encoder, when at hand."""
+        vocab = self.vocabulary
+        if vocab is None:
+            return None
+        encoder = self.text_encoder
+        if encoder.name != vocab.encoder_name:
+            from motok_robot.text import load_text_encoder
+
+            embedding = None
+            try:
+                encoder = load_text_encoder(vocab.encoder_spec)
+            except InputError as exc:
+                self.vocabulary = None  # not tried again for every prompt
+                self.vocabulary_status = f"prompts are not checked against the training captions: {exc}"
+                return None
+        return check_prompt(text, vocab, encoder, embedding)
 
     @property
     def max_seconds(self) -> float:
@@ -221,6 +251,12 @@ class MotionGenerator:
             cond.action = torch.tensor([cfg.action_labels.index(action)], device=self.device)
             label = f"action:{action}"
         timings["text"] = time.perf_counter() - t0
+        check = None
+        if text is not None and self.vocabulary is not None:
+            t_vocab = time.perf_counter()
+            check = self.check_vocabulary(label, cond.text_embedding[0].cpu())
+            timings["vocabulary"] = time.perf_counter() - t_vocab
+            warn_if_far(check)
 
         ds = cfg.downsample
         if trajectory is not None and local is not None:
@@ -276,7 +312,7 @@ class MotionGenerator:
         timings["joints"] = time.perf_counter() - t3
         return GeneratedMotion(joints=joints, features=feats, tokens=tokens[0].cpu().numpy().astype(np.int64),
                                text=label, seed=seed, model=self.model_id, fps=int(cfg.fps), timings=timings,
-                               decoder_seed=None if noise_seed == seed else noise_seed)
+                               decoder_seed=None if noise_seed == seed else noise_seed, vocabulary=check)
 
 
 _GENERATORS: dict[tuple, MotionGenerator] = {}

@@ -2,8 +2,10 @@
 
 Keys: ``joints`` float32 ``[T, 22, 3]`` (metres, z up), ``features`` float32 ``[T, 263]``, ``fps``
 (int), ``text`` (str; "" when unconditional), ``tokens`` int64 ``[N]``, ``seed`` (int), ``model``
-(str: identifiers of the models used), and ``decoder_seed`` (int) only when the decoder's noise
-came from another seed than ``seed``. No object arrays: ``np.load(path)`` works with the default
+(str: identifiers of the models used), ``decoder_seed`` (int) only when the decoder's noise
+came from another seed than ``seed``, and ``vocabulary_check`` (str, JSON) only when the prompt
+was compared with the planner's training captions
+(:class:`~motok_robot.text.vocabulary.VocabularyCheck`). No object arrays: ``np.load(path)`` works with the default
 ``allow_pickle=False``.
 
 The file is a zip written with fixed timestamps, so the same content gives byte-identical files
@@ -44,8 +46,10 @@ def write_npz_reproducible(path: str | Path, arrays: dict[str, np.ndarray]) -> P
 
 
 def save_motion(path: str | Path, joints: np.ndarray, features: np.ndarray, tokens: np.ndarray, text: str,
-                seed: int, model: str, fps: int = 20, decoder_seed: int | None = None) -> Path:
-    """Validate and write a ``motion.npz``."""
+                seed: int, model: str, fps: int = 20, decoder_seed: int | None = None,
+                vocabulary_check: str | None = None) -> Path:
+    """Validate and write a ``motion.npz``; ``vocabulary_check`` is
+    :meth:`~motok_robot.text.vocabulary.VocabularyCheck.to_json` of the prompt's check."""
     joints = np.asarray(joints, dtype=np.float32)
     features = np.asarray(features, dtype=np.float32)
     if joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3):
@@ -65,12 +69,18 @@ def save_motion(path: str | Path, joints: np.ndarray, features: np.ndarray, toke
     }
     if decoder_seed is not None:
         arrays["decoder_seed"] = np.array(int(decoder_seed))
+    if vocabulary_check is not None:
+        from motok_robot.text.vocabulary import VocabularyCheck
+
+        arrays["vocabulary_check"] = np.array(VocabularyCheck.from_json(vocabulary_check, "motion.npz "
+                                                                        "vocabulary_check").to_json())
     return write_npz_reproducible(path, arrays)
 
 
 def load_motion(path: str | Path) -> dict[str, np.ndarray | str | int]:
     """Read a ``motion.npz`` -> dict with numpy arrays and plain ``text``/``model``/``seed``/``fps``
-    (and ``decoder_seed`` when the file has one)."""
+    (and ``decoder_seed`` when the file has one; ``vocabulary_check`` as a checked dict, see
+    :meth:`~motok_robot.text.vocabulary.VocabularyCheck.to_dict`)."""
     path = Path(path)
     data = read_npz_fields(path, "motion file")
     for key in ("joints", "fps"):
@@ -83,4 +93,12 @@ def load_motion(path: str | Path) -> dict[str, np.ndarray | str | int]:
     for key in ("seed", "fps", "decoder_seed"):
         if key in data:
             out[key] = int(data[key])
+    if "vocabulary_check" in data:
+        from motok_robot.text.vocabulary import VocabularyCheck
+
+        field = np.asarray(data["vocabulary_check"])
+        if field.dtype.kind != "U" or field.shape != ():
+            raise InputError(f"{path}: field 'vocabulary_check' must be one JSON string, got {field.dtype} "
+                             f"{field.shape}")
+        out["vocabulary_check"] = VocabularyCheck.from_json(str(field), f"{path}: field 'vocabulary_check'").to_dict()
     return out
