@@ -1,4 +1,5 @@
-"""CLI of the planning stage: ``motok-robot train planner`` and ``motok-robot generate``.
+"""CLI of the planning stage: ``motok-robot train planner``, ``motok-robot generate`` and
+``motok-robot vocab`` (what the planners were trained on).
 
 Light module: torch and the models are imported inside the handlers.
 """
@@ -7,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import sys
 from pathlib import Path
 
 from motok_robot.errors import InputError
@@ -72,6 +74,19 @@ def register(commands, groups) -> None:
     # the control stage (motok_robot/control/cli.py, registered after this module) adds the
     # constraint options (--trajectory, --keyframes, ...) to this parser and wraps the handler
     gen.set_defaults(func=generate_command)
+
+    voc = commands.add_parser(
+        "vocab",
+        help="list the actions, styles and captions the shipped planners were trained on; check prompts against them",
+        description="What the planners were trained on (models/vocabulary.json, built from their training data): "
+        "actions and styles with their train clip counts, and with PROMPT arguments how near each prompt is to "
+        "the training captions (MiniLM cosine similarity) and whether generation would warn about it. "
+        "See docs/vocabulary.md.",
+    )
+    voc.add_argument("prompts", nargs="*", metavar="PROMPT", help="prompts to check (needs the MiniLM text encoder)")
+    voc.add_argument("--captions", action="store_true", help="also list the captions prompts are compared with")
+    voc.add_argument("--file", type=Path, default=None, help="vocabulary file (default models/vocabulary.json)")
+    voc.set_defaults(func=vocab_command)
 
 
 def _train(args: argparse.Namespace) -> int:
@@ -145,7 +160,11 @@ def generate_command(args: argparse.Namespace, generate_one=None) -> int:
         if out.is_dir() or (out.parent.exists() and not out.parent.is_dir()):
             raise InputError(f"--out {args.out}: cannot write {out} (a directory or a file is in the way)")
     gen = load_generator(args.planner, args.tokenizer, args.planner_run, args.device)
-    one = generate_one or (lambda generator, **kwargs: generator.generate(**kwargs))
+    plain = generate_one or (lambda generator, **kwargs: generator.generate(**kwargs))
+
+    def one(generator, **kwargs):
+        return _reporting_vocabulary(plain, generator, **kwargs)
+
     options = dict(seconds=args.seconds, seed=args.seed, cfg_scale=args.cfg, steps=args.steps,
                    decoder_steps=args.decoder_steps, temperature=args.temperature, top_k=args.top_k,
                    top_p=args.top_p, decoder_seed=args.decoder_seed)
@@ -154,10 +173,90 @@ def generate_command(args: argparse.Namespace, generate_one=None) -> int:
             motion = one(gen, **{**options, "text": prompt.text, "seconds": prompt.seconds, "seed": prompt.seed})
             motion.save(args.out / f"{i:03d}_{_slug(prompt.text)}.npz")
         print(f"{len(prompts)} motions written to {args.out}")
+        _note_unchecked(gen)
         return 0
     motion = one(gen, text=args.text, action=args.action, unconditional=args.unconditional, **options)
     motion.save(out)
     t = motion.timings
     print(f"{out}: {motion.joints.shape[0]} frames ({motion.seconds:.2f} s), {len(motion.tokens)} tokens; "
-          f"text {t['text']:.3f} s, plan {t['plan']:.3f} s, decode {t['decode']:.3f} s")
+          f"text {t['text']:.3f} s, plan {t['plan']:.3f} s, decode {t['decode']:.3f} s"
+          + (f", vocabulary check {t['vocabulary']:.3f} s" if "vocabulary" in t else ""))
+    if args.text is not None:
+        _note_unchecked(gen)
     return 0
+
+
+def _note_unchecked(generator) -> None:
+    """Say once, after the motions are written, why prompts were not checked against the vocabulary."""
+    if getattr(generator, "vocabulary", None) is None and getattr(generator, "vocabulary_status", ""):
+        print(f"motok-robot: note: {generator.vocabulary_status}", file=sys.stderr)
+
+
+def _reporting_vocabulary(generate_one, generator, **kwargs):
+    """``generate_one(generator, **kwargs)``, printing a far-from-the-vocabulary warning as one line."""
+    import warnings
+
+    from tqdm import tqdm
+
+    from motok_robot.text.vocabulary import VocabularyWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", VocabularyWarning)
+        motion = generate_one(generator, **kwargs)
+    for w in caught:
+        if issubclass(w.category, VocabularyWarning):
+            tqdm.write(f"motok-robot: warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    return motion
+
+
+def vocab_command(args: argparse.Namespace) -> int:
+    """``motok-robot vocab``: the training vocabulary, and with prompts, how near each is to it."""
+    from motok_robot.text.vocabulary import load_vocabulary
+
+    vocab = load_vocabulary(args.file)
+    print(format_vocabulary(vocab, captions=args.captions))
+    if not args.prompts:
+        return 0
+    import torch
+
+    from motok_robot.text.vocabulary import check_prompt
+
+    torch.set_num_threads(1)
+    print()
+    for prompt in args.prompts:
+        check = check_prompt(prompt, vocab)
+        print(("FAR   " if check.far else "near  ") + check.message)
+    return 0
+
+
+def format_vocabulary(vocab, captions: bool = False) -> str:
+    """The text ``motok-robot vocab`` prints: actions per source, styles, the threshold, the captions."""
+    data = vocab.data
+    clips = data.get("clips", {})
+    lines = [f"{vocab.path}: what the planners ({', '.join(sorted(vocab.planners))}) were trained on",
+             f"train split: {clips.get('train', '?')} clips with mirrors "
+             f"({', '.join(f'{k} {v}' for k, v in data.get('train_clips_by_source', {}).items())}); "
+             f"val {clips.get('val', '?')}, test {clips.get('test', '?')} held out", ""]
+    by_source: dict[str, list[dict]] = {}
+    for action in vocab.actions:
+        by_source.setdefault(action["source"], []).append(action)
+    for source, actions in by_source.items():
+        lines.append(f"{source}: {len(actions)} action(s) (train clips with mirrors, seconds)")
+        for a in actions:
+            label = a["action"] if len(a["action"]) <= 60 else a["action"][:59] + "\u2026"
+            lines.append(f"  {label:<60} {a['clips']:>5} {a.get('seconds', 0.0):>7.0f}")
+    if vocab.styles:
+        lines += ["", "styles (Bandai Namco, train clips): "
+                  + ", ".join(f"{k} {v}" for k, v in sorted(vocab.styles.items(), key=lambda x: (-x[1], x[0])))]
+    lines += ["", "a prompt is far from the vocabulary when its nearest caption's cosine similarity "
+              f"({vocab.encoder_name}) is below {vocab.threshold:.2f}; {len(vocab.captions)} captions are compared"
+              + (f", {len(vocab.partial)} partial ones (one part of a longer clip) are not" if vocab.partial else "")]
+    if captions:
+        lines += ["", "captions compared (train clips they stand for):"]
+        lines += [f"  {c.clips:>5}  {c.text}" for c in vocab.captions]
+        if vocab.partial:
+            lines += ["", "partial captions, never compared (train clips):"]
+            lines += [f"  {c.clips:>5}  {c.text}" for c in vocab.partial]
+    return "\n".join(lines)
