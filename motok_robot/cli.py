@@ -44,6 +44,7 @@ REGISTRARS = (
     "motok_robot.servo.cli",
     "motok_robot.export.cli",
     "motok_robot.eval.cli",
+    "motok_robot.sweep.cli",
 )
 
 
