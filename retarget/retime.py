@@ -41,25 +41,15 @@ def retime(trajectory: RobotTrajectory, factor: float) -> RobotTrajectory:
     if factor == 1.0 or T < 2:
         return replace(trajectory)
     fps = float(trajectory.fps)
-    n = int(round((T - 1) * factor)) + 1
-    return warp(trajectory, np.minimum(np.arange(n) / (fps * factor), (T - 1) / fps))
-
-
-def warp(trajectory: RobotTrajectory, times: np.ndarray) -> RobotTrajectory:
-    """``trajectory`` resampled at the original ``times`` [n] (s, non-decreasing, within the
-    clip), one new frame per entry at the same frame rate: a time warp.  ``retime_factor``
-    is multiplied by the ratio of the new duration to the old."""
-    T = trajectory.qpos.shape[0]
-    fps = float(trajectory.fps)
     t_old = np.arange(T) / fps
-    t_new = np.clip(np.asarray(times, dtype=np.float64), 0.0, t_old[-1])
+    n = int(round((T - 1) * factor)) + 1
+    t_new = np.minimum(np.arange(n) / (fps * factor), t_old[-1])
     qpos = _resample(trajectory.qpos, t_old, t_new)
     if qpos.shape[1] >= 7:  # free base: normalise the interpolated quaternion
         qpos[:, 3:7] /= np.linalg.norm(qpos[:, 3:7], axis=1, keepdims=True)
     nearest = np.clip(np.round(t_new * fps).astype(int), 0, T - 1)
-    ratio = (len(t_new) - 1) / (T - 1) if T > 1 and len(t_new) > 1 else 1.0
     return replace(
         trajectory, qpos=qpos, contacts=np.asarray(trajectory.contacts)[nearest],
         keypoint_error=_resample(np.asarray(trajectory.keypoint_error), t_old, t_new),
         source=_resample(np.asarray(trajectory.source), t_old, t_new).astype(np.float32),
-        retime_factor=float(trajectory.retime_factor) * float(ratio))
+        retime_factor=float(trajectory.retime_factor) * float(factor))

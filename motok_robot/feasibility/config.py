@@ -143,9 +143,6 @@ class FeasibilityConfig:
 
     #: play the motion this many times slower (1 = human timing); recorded as the time warp
     retime: float = 1.0
-    #: play every double-support phase shorter than this slower until it lasts this long (s;
-    #: 0 = keep the reference's timing) (:mod:`.timing`)
-    double_support_s: float = 0.0
     #: move the CoM so the cart-table ZMP stays on the planned feet (:mod:`.zmp_shift`)
     zmp_shift: bool = True
     #: how far inside the support polygon the shifted ZMP is kept (m)
@@ -167,8 +164,6 @@ class FeasibilityConfig:
     def __post_init__(self):
         if not 1.0 <= float(self.retime) <= 4.0:
             raise InputError(f"feasibility retime = {self.retime}: must lie in [1, 4] (times slower)")
-        if not 0.0 <= float(self.double_support_s) <= 1.0:
-            raise InputError(f"feasibility double_support_s = {self.double_support_s}: must lie in [0, 1] s")
         if self.zmp_axes not in ("lateral", "both"):
             raise InputError(f"feasibility zmp_axes = {self.zmp_axes!r}: use lateral or both")
         if not 0.0 <= float(self.zmp_margin_m) <= 0.05:

@@ -2,8 +2,7 @@
 
 Steps (each recorded in the output's ``feasibility`` field and ``feasibility.json``):
 
-1. optional uniform slow-down (``retime``) and longer double support (:mod:`.timing`): the
-   time warp the fidelity checks see;
+1. optional uniform slow-down (``retime``; the time warp the fidelity checks see);
 2. a CoM path whose cart-table ZMP stays on the planned feet (:mod:`.zmp_shift`);
 3. servo goals with inverse-dynamics feedforward (:mod:`.feedforward`) of that task;
 4. the balance controller's plan (:mod:`.balance`), which validation and playback run;
@@ -35,7 +34,6 @@ from motok_robot.feasibility.dynamics import required_torque
 from motok_robot.feasibility.feedforward import GOALS_FILE, feedforward_goals, save_servo_goals, servo_gains
 from motok_robot.feasibility.physics import execute, servo_model
 from motok_robot.feasibility.refine import refine_goals
-from motok_robot.feasibility.timing import stretched_times
 from motok_robot.feasibility.zmp_shift import shift_com
 
 RECORD_FILE = "feasibility.json"
@@ -67,7 +65,7 @@ def sole_contacts(index, qpos: np.ndarray, contact_height_m: float) -> np.ndarra
 def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, progress=None) -> FeasibleResult:
     """Run the stage on ``trajectory`` (a :class:`retarget.io.RobotTrajectory`) for robot ``index``
     (a :class:`~motok_robot.robots.index.RobotIndex`)."""
-    from retarget.retime import retime, warp
+    from retarget.retime import retime
 
     config = config or FeasibilityConfig()
     started = time.perf_counter()
@@ -75,11 +73,6 @@ def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, pr
     record: dict = {"config": config.to_dict()}
     if config.retime > 1.0:
         trajectory = retime(trajectory, config.retime)
-    if config.double_support_s > 0:
-        times, stretched = stretched_times(sole_contacts(index, np.asarray(trajectory.qpos), config.contact_height_m),
-                                           float(trajectory.fps), config.double_support_s)
-        trajectory = warp(trajectory, times)
-        record["double_support"] = {"min_s": config.double_support_s, "phases_stretched": stretched}
     record["time_warp"] = float(trajectory.retime_factor)
     fps = float(trajectory.fps)
     reference = np.asarray(trajectory.qpos, dtype=np.float64)
