@@ -153,7 +153,7 @@ def run_sweep(spec_path, out, workers: int | None = None, address: str | None = 
                 return ()
             files = motion_files(job.cell.motion)
             if hasattr(engine, "put"):
-                return tuple(engine.put(f"{digests[job.cell.motion]}:{p.name}", p.read_bytes()) for p in files)
+                return tuple(engine.put(f"{digests[job.cell.motion]}:{p.name}", p.read_bytes) for p in files)
             return tuple(p.read_bytes() for p in files)
 
         def done(job, result) -> None:

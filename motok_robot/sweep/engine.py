@@ -23,7 +23,7 @@ WORKER_RETRIES = 1
 
 @dataclass
 class Job:
-    """A cell to run: its row keys (``cell``), the task sent to the worker, and its motion bytes' source."""
+    """A cell to run: the :class:`~motok_robot.sweep.spec.Cell`, the task its worker gets, the attempts so far."""
 
     cell: object
     task: dict
@@ -116,17 +116,19 @@ class RayEngine:
         self._spawned += 1
         return _Slot(self._remote.remote(self._env), self._spawned)
 
-    def put(self, key: str, blob: bytes):
-        """``blob`` in the object store, once per ``key`` (the motion files every cell of it reads)."""
+    def put(self, key: str, read):
+        """The bytes ``read()`` gives, put in the object store once per ``key`` (a motion file the
+        cells of it share)."""
         if key not in self._refs:
-            self._refs[key] = self.ray.put(blob)
+            self._refs[key] = self.ray.put(read())
         return self._refs[key]
 
     def run(self, jobs, blobs, done, running) -> None:
         ray = self.ray
         queue = deque(jobs)
         busy: dict = {}
-        while queue or busy:
+
+        def hand_out() -> None:
             for i, slot in enumerate(self.slots):
                 if slot.job is None and queue:
                     job = queue.popleft()
@@ -134,6 +136,9 @@ class RayEngine:
                     job.submitted = time.monotonic()
                     slot.job, slot.ref = job, slot.actor.run_cell.remote(job.task, *blobs(job))
                     busy[slot.ref] = i
+
+        while queue or busy:
+            hand_out()
             running(len(busy))
             ready, _ = ray.wait(list(busy), num_returns=1, timeout=0.5)
             for ref in ready:
@@ -152,6 +157,7 @@ class RayEngine:
                                                    f"(last: {_first_line(exc)})", slot.worker_name(ray))
                 except ray.exceptions.RayError as exc:
                     result = failure(job, "error", f"Ray: {_first_line(exc)}", slot.worker_name(ray))
+                hand_out()  # the worker's next cell first: writing this one's row overlaps with it
                 done(job, result)
             now = time.monotonic()
             for i, slot in enumerate(self.slots):

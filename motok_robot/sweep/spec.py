@@ -193,6 +193,12 @@ def _motion(value, field: str, where: _Where) -> tuple[Path, str]:
     full = p if p.is_absolute() else where.path.parent / p
     if not full.is_file():
         raise where.error(field, f"motion file {full} does not exist")
+    from motok_robot.limits import check_file_size
+
+    try:
+        check_file_size(full, "motion file")  # the driver reads it to send it to the workers
+    except InputError as exc:
+        raise where.error(field, str(exc)) from None
     return full.resolve(), value
 
 

@@ -149,7 +149,8 @@ class CellRunner:
             row.update(status="error", error=one_line(exc))
             folder = out.with_name(out.name + ".failed")
         files = read_folder(folder)
-        shutil.rmtree(folder, ignore_errors=True)
+        for left in (out, out.with_name(out.name + ".failed")):
+            shutil.rmtree(left, ignore_errors=True)
         row["cell_s"] = time.perf_counter() - start
         return {"row": row, "files": files}
 
