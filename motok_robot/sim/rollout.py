@@ -30,10 +30,15 @@ soles carries load; a CoP on the edge means the robot is tipping.
 
 Tracking RMSE and base drift are measured at the reference frame times before the fall
 (the whole clip when it does not fall).
+
+Robustness tests change the physics only: ``model`` (a changed copy of :func:`servo_model`, e.g.
+stiffer servos or heavier links) and ``pushes`` (:class:`Push`, external forces on a body during
+the rollout); the reference, the servo goals and the balance plan stay as given.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import mujoco
@@ -75,6 +80,26 @@ class RolloutResult:
     wall_s: float = 0.0
 
 
+@dataclass(frozen=True)
+class Push:
+    """An external force on one body during a rollout: ``force`` (N, world frame, at the body's
+    centre of mass) from ``start_s`` for ``duration_s`` (a step gets it when it starts inside)."""
+
+    body: int
+    force: tuple[float, float, float]
+    start_s: float
+    duration_s: float = 0.1
+
+
+def push_wrench(pushes: Sequence[Push], nbody: int, time_s: float) -> np.ndarray:
+    """``xfrc_applied`` [nbody, 6] of a physics step starting at ``time_s``."""
+    out = np.zeros((nbody, 6))
+    for push in pushes:
+        if push.start_s <= time_s + 1e-9 and time_s + 1e-9 < push.start_s + push.duration_s:
+            out[push.body, :3] += push.force
+    return out
+
+
 def servo_model(index: RobotIndex, config: ValidationConfig) -> tuple[mujoco.MjModel, np.ndarray]:
     """Copy of the robot model ready for tracking, and each actuator's gear [nu]
     (:func:`motok_robot.feasibility.physics.servo_model` with the validation settings)."""
@@ -89,7 +114,8 @@ def _up_axis(quat: np.ndarray) -> np.ndarray:
 
 def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: ValidationConfig,
              goals: np.ndarray | None = None, plan: BalancePlan | None = None,
-             initial_qvel: np.ndarray | None = None, judge_qpos: np.ndarray | None = None) -> RolloutResult:
+             initial_qvel: np.ndarray | None = None, judge_qpos: np.ndarray | None = None,
+             model: mujoco.MjModel | None = None, pushes: Sequence[Push] = ()) -> RolloutResult:
     """Roll the robot out in physics tracking ``qpos`` [T, nq] (frames at ``fps``).
 
     ``goals`` [T, nj] (rad, robot joint order) are the servo goals when they differ from the
@@ -100,11 +126,16 @@ def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: Validation
 
     The robot starts at ``qpos[0]`` with ``initial_qvel`` (default: the finite-difference velocity
     of ``qpos``).  Falls, tracking and drift are judged against ``judge_qpos`` when given (the
-    kinematic reference of an executed trajectory), else against ``qpos``."""
+    kinematic reference of an executed trajectory), else against ``qpos``.  ``model`` replaces
+    the servo model (default ``servo_model(index, config)``; a changed copy of it tests
+    robustness) and ``pushes`` are applied during the rollout."""
     import time as _time
 
     start = _time.perf_counter()
-    model, gear = servo_model(index, config)
+    if model is None:
+        model, gear = servo_model(index, config)
+    else:
+        gear = np.where(model.actuator_gear[:, 0] == 0, 1.0, model.actuator_gear[:, 0])
     dt = float(model.opt.timestep)
     T = qpos.shape[0]
     duration = (T - 1) / fps
@@ -132,13 +163,22 @@ def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: Validation
         mujoco.mj_forward(model, data)
         initial = np.zeros(mujoco.mj_stateSize(model, spec))
         mujoco.mj_getState(model, data, initial, spec)
-        states, _ = mj_rollout.rollout(model, data, initial[None], control[None])
+        if pushes:  # each step's control is then its ctrl followed by its xfrc_applied
+            wrench = np.stack([push_wrench(pushes, model.nbody, i * dt).ravel() for i in range(nstep)])
+            states, _ = mj_rollout.rollout(model, data, initial[None], np.hstack([control, wrench])[None],
+                                           control_spec=mujoco.mjtState.mjSTATE_CTRL | mujoco.mjtState.mjSTATE_XFRC_APPLIED)
+        else:
+            states, _ = mj_rollout.rollout(model, data, initial[None], control[None])
         states = states[0]  # [nstep, nstate] state after each step
     else:
         physics = ServoPhysics(index, rate_hz=plan.config.rate_hz, model=model)
         initial = physics.initial_state(qpos[0], qvel_ref[0], goal_frames[0])
         controller = BalanceController(plan, index.joint_range)
-        out = physics.run(initial[None], goal_frames, fps, duration, controller)
+
+        def push(step, b, data):
+            data.xfrc_applied[:] = push_wrench(pushes, model.nbody, step * dt)
+
+        out = physics.run(initial[None], goal_frames, fps, duration, controller, perturb=push if pushes else None)
         states = out["states"][0]
         nstep = states.shape[0]
         step_end = out["step_time"]
@@ -189,6 +229,8 @@ def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: Validation
     for s, step in enumerate(cop_step):
         mujoco.mj_setState(model, data, states[step], spec)
         data.ctrl[:] = control[step]
+        if pushes:
+            data.xfrc_applied[:] = push_wrench(pushes, model.nbody, step_end[step])
         mujoco.mj_forward(model, data)
         total, weighted = 0.0, np.zeros(2)
         if data.ncon:

@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,7 +26,7 @@ from motok_robot.sim.fidelity import fidelity_measures
 from motok_robot.sim.kinematic import KinematicResult, replay
 from motok_robot.sim.notes import joint_limit_notes
 from motok_robot.sim.report import SCHEMA, build_checks, robot_description_record, summary_text, write_report
-from motok_robot.sim.rollout import RolloutResult, servo_model, simulate
+from motok_robot.sim.rollout import Push, RolloutResult, servo_model, simulate
 from motok_robot.sim.trajectory import RobotTrajectory, check_matches_robot, load_robot_npz
 
 
@@ -51,7 +52,8 @@ class ValidationResult:
 def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationConfig | None = None,
                         out_dir: str | Path | None = None, physics: bool = True, plots: bool = True,
                         render: bool = False, input_sha256: str | None = None,
-                        balance: BalanceConfig | None = None, servo_goals: dict | None = None) -> ValidationResult:
+                        balance: BalanceConfig | None = None, servo_goals: dict | None = None,
+                        physics_model=None, pushes: Sequence[Push] = ()) -> ValidationResult:
     """Validate ``trajectory`` on ``robot`` (a ``Robot`` or a prebuilt :class:`RobotIndex`).
 
     With ``out_dir``, writes ``report.json``, the PNG plots (``plots``) and ``validation.mp4``
@@ -70,6 +72,9 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
     rollout plays those goals with that plan, as the feasibility stage made them.  A trajectory
     with ``reference_qpos`` (the feasibility stage's executed trajectory) is judged against that
     reference: falls, tracking, drift and fidelity.
+
+    ``physics_model`` and ``pushes`` change the physics only, for robustness tests (see
+    :func:`~motok_robot.sim.rollout.simulate`): the goals and the plan stay those of the nominal robot.
     """
     config = config or ValidationConfig()
     index = robot if isinstance(robot, RobotIndex) else index_robot(robot)
@@ -98,7 +103,7 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
                 plan = build_plan(index, trajectory.qpos, trajectory.fps, kin.contact, balance)
         judge = trajectory.reference_qpos if trajectory.reference_qpos is not None else trajectory.qpos
         roll = simulate(index, trajectory.qpos, trajectory.fps, config, goals=goals, plan=plan,
-                        initial_qvel=trajectory.initial_qvel, judge_qpos=judge)
+                        initial_qvel=trajectory.initial_qvel, judge_qpos=judge, model=physics_model, pushes=pushes)
         fidelity = fidelity_measures(index, roll.qpos, judge, roll.valid_frames)
         timing["physics"] = time.perf_counter() - start
     checks, metrics, per_foot, per_joint = build_checks(index, kin, roll, config, trajectory.contacts, fidelity)
