@@ -30,9 +30,9 @@ GROUPS = {
 
 # Modules that add subcommands, in the order they appear in --help. The LEADING ones add only
 # top-level commands and come before the groups.
-LEADING = ("motok_robot.pipeline_cli",)
+LEADING = ("motok_robot.pipeline.cli",)
 REGISTRARS = (
-    "motok_robot.pipeline_cli",
+    "motok_robot.pipeline.cli",
     "motok_robot.data.cli",
     "motok_robot.planner.cli",
     "motok_robot.control.cli",
