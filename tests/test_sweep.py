@@ -67,7 +67,8 @@ max-retime = 1.25
     ("motions = ['stand.npz']\n[variants.a]\nfeasible-retime = 2\n", "variants.a", "needs --feasible"),
     ("motions = ['stand.npz']\n[variants.a]\ntrajectory = 'path.csv'\n", "variants.a", "motion files"),
     ("[[cells]]\nmotion = 'stand.npz'\nvariant = 'b'\n", "cells[0].variant", "unknown variant 'b'"),
-    ("[[cells]]\nmotion = 'stand.npz'\n[[cells]]\nmotion = 'stand.npz'\n", "cells[1]", "same cell"),
+    ("[[cells]]\nmotion = 'stand.npz'\n[[cells]]\nmotion = 'stand.npz'\n", "cells[1]", "the same as cells[0]"),
+    ("motions = ['stand.npz']\nseeds = [2, 3, 2]\n", "seeds[2]", "the same as seeds[0]"),
     ("seeds = [1]\n[[cells]]\nmotion = 'stand.npz'\n", "seeds", "not both"),
     ("motions = ['stand.npz']\ntime_budget_s = -1\n", "time_budget_s", "positive"),
 ])

@@ -143,11 +143,6 @@ def parse_spec(data: dict, path: Path) -> SweepSpec:
         cells = _listed_cells(data["cells"], variants, where)
     else:
         cells = _product_cells(data, variants, where)
-    keys = {}
-    for i, cell in enumerate(cells):
-        if cell.key in keys:
-            raise where.error(f"cells[{i}]", f"the same cell as cells[{keys[cell.key]}]")
-        keys[cell.key] = i
     spec = SweepSpec(path=path, cells=cells, variants=variants, time_budget_s=float(budget), plots=plots)
     from motok_robot.sweep.run_options import check_variants
 
@@ -281,6 +276,9 @@ def _product_cells(data: dict, variants: dict[str, Variant], where: _Where) -> l
     robots = [_robot(r, f"robots[{i}]", where) for i, r in enumerate(_list(data, "robots", where, ["op3_like"]))]
     if not robots:
         raise where.error("robots", "is empty")
+    for key, values in (("prompts", prompts), ("motions", [m for m, _ in motions]), ("seeds", seeds),
+                        ("robots", robots)):
+        _unique(values, key, where)
     count = (len(prompts) + len(motions)) * len(seeds) * len(robots) * len(variants)
     if count > MAX_CELLS:
         raise where.error("prompts", f"the product gives {count} cells; at most {MAX_CELLS} per spec (split it)")
@@ -320,4 +318,14 @@ def _listed_cells(entries, variants: dict[str, Variant], where: _Where) -> list[
         else:
             raise where.error(f"{field}.variant", f"name one of the variants ({', '.join(variants)})")
         cells.append(Cell(prompt, motion, label, seed, robot, variant))
+    _unique([c.key for c in cells], "cells", where)
     return cells
+
+
+def _unique(values: list, key: str, where: _Where) -> None:
+    """InputError naming ``key[i]`` when entry ``i`` repeats an earlier one."""
+    first: dict = {}
+    for i, value in enumerate(values):
+        if value in first:
+            raise where.error(f"{key}[{i}]", f"the same as {key}[{first[value]}]")
+        first[value] = i
