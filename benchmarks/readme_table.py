@@ -143,14 +143,15 @@ def load_average(data: dict) -> float | None:
     return float(load1[0]) if load1[0] is not None else None
 
 
-def measured_on(data: dict) -> str:
-    """``2026-12-01, load 0.3`` from a result's machine description (what is known of it)."""
+def measured_on(data: dict, with_load: bool = True) -> str:
+    """``2026-12-01, load 0.3`` from a result's machine description (what is known of it); the load
+    is left out where the machine was described after the work (an imported batch)."""
     machine = data.get("machine") or {}
     parts = []
     date = machine.get("date_utc")
     if date:
         parts.append(str(date)[:10])
-    load1 = load_average(data)
+    load1 = load_average(data) if with_load else None
     if load1 is not None:
         parts.append(f"load {load1:.1f}")
     return ", ".join(parts) or "-"
@@ -245,7 +246,7 @@ def table_readme(results: Path, shipped: dict[str, str]) -> str:
     rows.append(("text → robot, `op3_like`", f"the {len(robot)} prompts of `examples/prompts_eight.txt`, seed 0, "
                  "every default: clips passing every check",
                  f"**{len(passed)} of {len(robot)}**" + (f" (failing: {fails})" if fails else ""),
-                 measured_on(robot_data), source(ROBOT_EIGHT)))
+                 measured_on(robot_data, with_load=False), source(ROBOT_EIGHT)))
     reference, planners = generation_rows(results, shipped)
     real = reference.get("real (test)")
     for kind, row in planners.items():
@@ -508,10 +509,11 @@ def refresh(text: str, results: Path = RESULTS_DIR, shipped: dict[str, str] | No
 STAGE_TIMES = ("generate", "retarget", "feasibility", "validate", "balance", "retime", "plots", "render", "playback", "total")
 
 
-def import_batches(folders: list[Path], out: Path) -> Path:
+def import_batches(folders: list[Path], out: Path, code: str | None = None) -> Path:
     """The clips of ``run --prompts`` output folders (each clip's ``pipeline.json``, in folder order;
     several folders are joined, e.g. when a batch was stopped and its remaining prompts run again)
-    -> the robot JSON."""
+    -> the robot JSON. ``code``: the commit whose code ran the batch, when it is not this checkout's
+    (``machine.commit`` records the checkout the import ran in)."""
     rows, models = [], set()
     for folder in folders:
         records = sorted(p for p in Path(folder).glob("*/pipeline.json") if not p.parent.name.startswith("."))
@@ -532,7 +534,7 @@ def import_batches(folders: list[Path], out: Path) -> Path:
                 models.add(str(result["model"]))
     payload = {"benchmark": "motok-robot run --prompts FILE --no-render --out OUT, every default; rows from "
                             "each clip's pipeline.json (" + ", ".join(str(f) for f in folders) + ")",
-               "models": sorted(models), "rows": rows}
+               "models": sorted(models), "code_commit": code, "rows": rows}
     return write_json(out, payload)
 
 
@@ -543,11 +545,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--write", nargs="+", type=Path, metavar="FILE", help="regenerate the marked tables in FILE")
     parser.add_argument("--import-batch", nargs="+", type=Path, metavar="OUT",
                         help=f"turn run --prompts output folders into benchmarks/results/{ROBOT_EIGHT}")
+    parser.add_argument("--code", metavar="REV", help="with --import-batch: the commit whose code ran the batch")
     parser.add_argument("--results", type=Path, default=RESULTS_DIR, help="results folder (default benchmarks/results)")
     args = parser.parse_args(argv)
     try:
         if args.import_batch:
-            print(f"wrote {import_batches(args.import_batch, args.results / ROBOT_EIGHT)}")
+            print(f"wrote {import_batches(args.import_batch, args.results / ROBOT_EIGHT, args.code)}")
             return 0
         stale = []
         for path in args.check or args.write or []:
