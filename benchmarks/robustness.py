@@ -18,7 +18,7 @@ the servo velocity limit, a two-step walk) and, when ``--datasets`` exists, the 
 ``--work/retarget/ROBOT/CLIP/robot.npz`` (``--retarget [GLOB ...]`` retargets the missing ones, or
 those matching a glob, as that script does and into its cache: seconds to minutes each).
 
-    python benchmarks/robustness.py [--robot op3_like] [--push-fractions 0.2 0.3 0.4] [--max-clips N]
+    python benchmarks/robustness.py [--robot op3_like] [--push-fractions 0.2 0.3 0.4] [--walk-period S] [--max-clips N]
         [--no-mocap] [--clips GLOB ...] [--retarget [GLOB ...]] [--out JSON]
 
 Prints a line per clip and the table perturbation x mode (clips, passed, fell, pass rate);
@@ -101,14 +101,15 @@ def validate_perturbed(trajectory, index, perturbation: dict, mode: str, models:
 
 
 # -- clips ------------------------------------------------------------------------------------------
-def synthetic_clips(index) -> list[dict]:
-    """The clean motions of ``motok_robot.sim.synthetic`` (qpos at FPS)."""
+def synthetic_clips(index, walk_period_s: float = 3.2) -> list[dict]:
+    """The clean motions of ``motok_robot.sim.synthetic`` (qpos at FPS); the walk takes
+    ``walk_period_s`` per step."""
     from motok_robot.sim import synthetic as S
 
     clips = [("stand_4s", lambda: S.standing(index, 4.0, FPS)),
              ("squat_3s", lambda: S.squat(index, 3.0, FPS)),
              ("arm_swing_3s", lambda: S.too_fast(index, 3.0, FPS, speed_ratio=0.5)[0]),
-             ("walk_2_steps", lambda: S.walk(index, steps=2, step_period_s=3.2, fps=FPS))]
+             ("walk_2_steps", lambda: S.walk(index, steps=2, step_period_s=walk_period_s, fps=FPS))]
     out = []
     for name, make in clips:
         try:
@@ -177,6 +178,8 @@ def main(argv=None) -> int:
     ap.add_argument("--push-fractions", type=float, nargs="+", default=[0.2, 0.3, 0.4], metavar="F",
                     help="push sizes as fractions of the robot's weight (0.1 s each)")
     ap.add_argument("--max-clips", type=int, default=None, metavar="N", help="the first N clips that pass nominally")
+    ap.add_argument("--walk-period", type=float, default=3.2, metavar="S",
+                    help="step period of the synthetic walk (the OP3 needs 6.4 s to pass the torque check)")
     ap.add_argument("--no-mocap", action="store_true", help="synthetic clips only")
     ap.add_argument("--clips", nargs="+", default=None, metavar="GLOB",
                     help="keep mocap clips whose name matches one glob")
@@ -196,7 +199,7 @@ def main(argv=None) -> int:
     robot = load(args.robot)
     index = index_robot(robot)
     started = time.perf_counter()
-    clips = synthetic_clips(index)
+    clips = synthetic_clips(index, args.walk_period)
     missing: list[str] = []
     if not args.no_mocap:
         if args.datasets.is_dir():
@@ -211,7 +214,7 @@ def main(argv=None) -> int:
     names = [v["name"] for v in variants]
     weight = index.total_mass * float(-index.model.opt.gravity[2])
     meta = {"robot": args.robot, "weight_n": weight, "push_s": PUSH_S, "push_start": "mid-clip",
-            "push_fractions": args.push_fractions, "push_body": index.model.body(index.root_body).name,
+            "push_fractions": args.push_fractions, "walk_step_period_s": args.walk_period, "push_body": index.model.body(index.root_body).name,
             "perturbations": variants, "modes": {"closed": "BalanceConfig()", "open": "BalanceConfig(enabled=False)"},
             "nominal_screen": [], "mocap_without_retarget": missing}
     machine = machine_description()
