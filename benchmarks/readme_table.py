@@ -133,8 +133,8 @@ def require_shipped(model_id: str, kind: str, source: str, shipped: dict[str, st
         if digest is None or key not in measured:
             continue
         if not digest.startswith(measured[key][:12]) and not measured[key].startswith(digest):
-            raise SourceError(f"{source}: measured {key} weights {measured[key]}, the shipped {kind} run has {digest}: "
-                              "re-measure with the command in that file's section of models/MODEL_CARD.md")
+            raise SourceError(f"{source}: measured {key} weights {measured[key]}, the shipped {kind} run has {digest}; "
+                              f"re-measure: {WRITTEN_BY.get(source, 'see benchmarks/readme_table.py sources')}")
 
 
 def load_average(data: dict) -> float | None:
