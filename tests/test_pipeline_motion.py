@@ -40,3 +40,37 @@ def test_run_motion_errors_are_one_line(stand_npz, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cannot be combined with --motion" in err[0]
     assert not (tmp_path / "o").exists()
+
+
+def test_playback_none_skips_the_stage_and_a_motion_file_has_no_vocabulary_check(stand_npz, tmp_path):
+    from motok_robot.pipeline import Pipeline
+
+    result = Pipeline().run(None, motion=stand_npz, out_dir=tmp_path / "out", playback="none", render=False,
+                            plots=False)
+    assert result.playback.status == "skipped" and "playback_log" not in result.files
+    assert not (tmp_path / "out" / "playback.csv").exists()
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["vocabulary"] is None  # motion files are not prompts
+
+
+def test_a_far_prompt_becomes_a_note_of_run_and_its_report(stand_npz, tmp_path, monkeypatch):
+    from motok_robot.pipeline import Pipeline, stages
+    from motok_robot.text.vocabulary import VocabularyCheck
+
+    check = VocabularyCheck(text="a person swims", similarity=0.41, threshold=0.72,
+                            nearest=[("A person walks.", 0.41)], encoder="test", vocabulary="0" * 16)
+    real = stages.generate
+
+    def generate_far(*args, **kwargs):
+        motion = real(*args, **kwargs)
+        motion.vocabulary = check
+        return motion
+
+    monkeypatch.setattr(stages, "generate", generate_far)
+    result = Pipeline().run(None, motion=stand_npz, out_dir=tmp_path / "out", playback="none", render=False,
+                            plots=False)
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["vocabulary"]["far"] is True
+    assert any(n.startswith("vocabulary:") and "A person walks." in n for n in report["notes"])
+    assert any(n.startswith("vocabulary:") for n in result.notes)
+    assert "vocabulary:" in (tmp_path / "out" / "summary.md").read_text()

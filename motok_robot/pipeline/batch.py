@@ -61,6 +61,7 @@ def run_batch(pipe, prompts: list[PromptSpec], out_dir, robot: str = "op3_like",
             else:
                 row.update(seconds=round(res.seconds, 3), passed=res.passed,
                            failed_checks=";".join(res.failed_checks), playback=res.playback.status,
+                           vocabulary_far=bool((res.report.get("vocabulary") or {}).get("far", False)),
                            **{f"{k}_s": round(v, 3) for k, v in res.timings.items() if k in (*STAGES, "total")})
             rows.append(row)
     finally:  # also after Ctrl-C: the rows of the prompts that ran

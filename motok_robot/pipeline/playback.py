@@ -34,6 +34,9 @@ def play(pipeline_config: PipelineConfig, robot, tmp: Path, mode: str, port, for
         gate = str(exc).split("refusing to play: ", 1)[-1].split(". Validate it first", 1)[0]
         gate = gate.replace(str(tmp) + os.sep, "")  # name files relative to the output folder
     summary = PlaybackSummary(mode=mode, status="completed", gate=gate)
+    if mode == "none":
+        summary.status, summary.line = "skipped", "playback not asked for"
+        return summary
     if not robot.servos:
         summary.status = "skipped"
         summary.line = f"robot {robot.name} has no servo map; nothing to play"
@@ -49,6 +52,10 @@ def play(pipeline_config: PipelineConfig, robot, tmp: Path, mode: str, port, for
                       PlaybackWarning, stacklevel=3)
     servo_map = ServoMap.from_specs(robot.servos)
     trajectory = load_trajectory(files["robot"], servo_map, robot.name, files["report"])
+    if mode == "port" and not trajectory.plan_joints and not force:  # as `play`: only validated goals
+        summary.status = "refused"
+        summary.line = "hardware playback refused: the report records no servo goals (pass --force to play anyway)"
+        return summary
     defaults = pipeline_config.playback or PlaybackConfig()
     rate = defaults.rate_hz
     if pipeline_config.playback is None and robot.bus is not None:

@@ -12,7 +12,7 @@ from motok_robot.text.prompts import check_seconds, check_seed
 from motok_robot.text.validate import check_text
 
 #: where the playback stage streams: an emulated servo chain, the MuJoCo model, real servos
-PLAYBACK_MODES = ("dry-run", "sim", "port")
+PLAYBACK_MODES = ("dry-run", "sim", "port", "none")
 #: Clip length used with constraints when no ``seconds`` is given (the planner's no-text default).
 DEFAULT_CONSTRAINED_SECONDS = 6.0
 

@@ -13,8 +13,8 @@ STAGES = ("generate", "retarget", "feasibility", "validate", "balance", "retime"
 class PlaybackSummary:
     """What the playback stage did.
 
-    ``mode``: dry-run / sim / port; ``status``: ``completed``, ``refused`` (hardware without a
-    passing report), ``skipped`` (robot without servos), ``stopped`` (a servo fault or a fall)
+    ``mode``: dry-run / sim / port / none; ``status``: ``completed``, ``refused`` (hardware without a
+    passing report), ``skipped`` (robot without servos, or playback ``none``), ``stopped`` (a servo fault or a fall)
     or ``error``; ``gate``: None when the validation report allows hardware playback, else why
     not; ``line``: the streamer's one-line result; ``fell``: sim only.
     """

@@ -121,7 +121,8 @@ class Pipeline:
             seed: seeds generation (same seed, same motion).
             constraints: a :class:`motok_robot.control.constraints.Constraints` (None: free).
             out_dir: output folder (must not exist, or be empty, unless ``overwrite``).
-            playback: ``"dry-run"`` (emulated servo chain), ``"sim"`` (MuJoCo) or ``"port"``.
+            playback: ``"dry-run"`` (emulated servo chain), ``"sim"`` (MuJoCo), ``"port"`` or
+                ``"none"`` (no playback stage: a validation sweep).
             port: serial device for ``playback="port"``.
             force: play on hardware even when validation failed.
             render: write ``video.mp4`` (and ``playback_sim.mp4`` with ``playback="sim"`` and

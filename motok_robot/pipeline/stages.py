@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import time
+import warnings
 from pathlib import Path
 
 from motok_robot.errors import InputError
@@ -13,6 +14,7 @@ from motok_robot.pipeline.repairs import BALANCE_CHECKS, SPEED_CHECKS, rebalance
 from motok_robot.pipeline.request import DEFAULT_CONSTRAINED_SECONDS
 from motok_robot.pipeline.result import PipelineResult
 from motok_robot.pipeline.source import load_source_motion
+from motok_robot.text.vocabulary import VocabularyWarning, vocabulary_note
 
 #: the validation plots the plots stage writes
 PLOT_FILES = ("balance_topview.png", "feet.png", "joints.png", "torques.png")
@@ -35,8 +37,13 @@ def run_stages(pipe, req, entry, tmp: Path, timings, bar, state, constraints, co
     # 1. generation -> motion.npz
     stage("generate")
     t = time.perf_counter()
-    motion = generate(pipe, req, constraints, control, control_path)
+    with warnings.catch_warnings():  # a prompt far from the training captions: a note, below
+        warnings.simplefilter("ignore", VocabularyWarning)
+        motion = generate(pipe, req, constraints, control, control_path)
     files["motion"] = motion.save(tmp / "motion.npz")
+    vocabulary = vocabulary_note(motion)
+    if vocabulary:
+        notes.append(vocabulary)
     timings["generate"] = time.perf_counter() - t
     bar.update()
 
@@ -106,6 +113,10 @@ def run_stages(pipe, req, entry, tmp: Path, timings, bar, state, constraints, co
         timings["retime"] = time.perf_counter() - t
     report = validation.report
     report["outputs"] = {"report": "report.json", "plots": [], "video": None}
+    check = getattr(motion, "vocabulary", None)
+    report["vocabulary"] = check.to_dict() if check is not None else None
+    if vocabulary:
+        report.setdefault("notes", []).append(vocabulary)
     if plots:
         from motok_robot.sim.plots import save_plots
 

@@ -78,7 +78,7 @@ def write_summary(result: PipelineResult, tmp: Path) -> None:
 
 def write_summary_csv(out: Path, rows: list[dict]) -> None:
     """Write ``out/summary.csv`` (one row per prompt of a batch), atomically."""
-    columns = ["index", "text", "seconds", "seed", "folder", "passed", "failed_checks", "playback",
+    columns = ["index", "text", "seconds", "seed", "folder", "passed", "failed_checks", "vocabulary_far", "playback",
                *(f"{s}_s" for s in (*STAGES, "total")), "error"]
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=columns, extrasaction="ignore")
