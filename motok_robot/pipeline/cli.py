@@ -100,11 +100,9 @@ def run_command(args: argparse.Namespace) -> int:
     os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo is imported (headless video)
     from motok_robot.errors import InputError
     from motok_robot.pipeline import (
-        DEFAULT_CONSTRAINED_SECONDS, Pipeline, PipelineConfig, check_out_dir, check_playback, check_robot,
-        check_seconds, check_seed, check_text, read_prompts,
+        Pipeline, check_out_dir, check_playback, check_robot, check_seconds, check_seed, check_text, read_prompts,
     )
     from motok_robot.robots import DEFAULT_ROBOT
-    from retarget.cli import balance_config
 
     robot = args.robot or DEFAULT_ROBOT
     playback = "sim" if args.sim else "port" if args.port else "dry-run"
@@ -136,24 +134,11 @@ def run_command(args: argparse.Namespace) -> int:
         check_robot(robot)
         check_playback(playback, args.port)
         check_out_dir(args.out, args.overwrite)
-    generation = {"cfg_scale": args.cfg} if args.cfg is not None else {}
-    retarget_config = balance_config(args)
-    pipe = Pipeline(PipelineConfig(planner=args.planner, tokenizer_run=args.tokenizer, planner_run=args.planner_run,
-                                   device=args.device, generation=generation, plots=not args.no_plots,
-                                   realtime=args.realtime, sim_video=args.sim_video, max_retime=args.max_retime,
-                                   balance_zmp_weight=args.balance_zmp_weight,
-                                   balance_acceleration_weight=args.balance_acceleration_weight, retarget=retarget_config,
-                                   feasibility=_feasibility_config(args)))
+    pipe = Pipeline(pipeline_config(args))
     if args.prompts is not None:
         return _run_batch(pipe, prompts, args, robot, playback)
 
-    constraints = control_config = None
-    if control:
-        from motok_robot.control.options import constraints_from_args, control_config_from_args
-
-        seconds = seconds or DEFAULT_CONSTRAINED_SECONDS
-        constraints = constraints_from_args(args, round(seconds * 20))
-        control_config = control_config_from_args(args)
+    seconds, constraints, control_config = constraint_arguments(args, seconds)
     result = pipe.run(args.text, robot=robot, seconds=seconds, seed=seed, constraints=constraints,
                       out_dir=args.out, playback=playback, port=args.port, force=args.force,
                       render=not args.no_render, control=control_config,
@@ -206,7 +191,36 @@ def _run_batch(pipe, prompts, args, robot: str, playback: str) -> int:
     return 0 if passed == len(rows) else 1
 
 
-def _feasibility_config(args):
+def pipeline_config(args: argparse.Namespace, plots: bool | None = None, sim_video: bool | None = None):
+    """The :class:`~motok_robot.pipeline.PipelineConfig` of parsed ``run`` options (``plots`` and
+    ``sim_video`` override ``--no-plots`` / ``--sim-video``; a sweep sets them itself)."""
+    from motok_robot.pipeline import PipelineConfig
+    from retarget.cli import balance_config
+
+    generation = {"cfg_scale": args.cfg} if args.cfg is not None else {}
+    return PipelineConfig(planner=args.planner, tokenizer_run=args.tokenizer, planner_run=args.planner_run,
+                          device=args.device, generation=generation,
+                          plots=not args.no_plots if plots is None else plots, realtime=args.realtime,
+                          sim_video=args.sim_video if sim_video is None else sim_video, max_retime=args.max_retime,
+                          balance_zmp_weight=args.balance_zmp_weight,
+                          balance_acceleration_weight=args.balance_acceleration_weight, retarget=balance_config(args),
+                          feasibility=feasibility_config(args))
+
+
+def constraint_arguments(args: argparse.Namespace, seconds: float | None):
+    """``(seconds, constraints, control config)`` of the constraint options (``--trajectory`` and
+    the like; both None without them): constrained clips default to
+    :data:`~motok_robot.pipeline.DEFAULT_CONSTRAINED_SECONDS`."""
+    if not _has_control(args):
+        return seconds, None, None
+    from motok_robot.control.options import constraints_from_args, control_config_from_args
+    from motok_robot.pipeline import DEFAULT_CONSTRAINED_SECONDS
+
+    seconds = seconds or DEFAULT_CONSTRAINED_SECONDS
+    return seconds, constraints_from_args(args, round(seconds * 20)), control_config_from_args(args)
+
+
+def feasibility_config(args: argparse.Namespace):
     """The feasibility stage's settings from ``--feasible`` / ``--feasible-retime`` (None: off)."""
     if not args.feasible:
         if args.feasible_retime != 1.0:

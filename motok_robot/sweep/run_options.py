@@ -3,10 +3,7 @@
 The options are parsed by the ``run`` command's own parser (built by the ``register`` function
 of the ``run`` command's module), so a sweep knows every ``run`` option, its type and its default
 exactly as ``run`` does.  :func:`pipeline_config` and :func:`run_arguments` then map the parsed
-options the way ``run``'s handler does; that mapping is written inline in the handler, so this
-module is the adapter that mirrors it (the retargeting and the constraint options go through the
-same public helpers the handler calls: :func:`retarget.cli.balance_config`,
-:mod:`motok_robot.control.options`).
+options with the functions ``run``'s handler uses (:mod:`motok_robot.pipeline.cli`).
 """
 
 from __future__ import annotations
@@ -53,10 +50,7 @@ class _RaisingParser(argparse.ArgumentParser):
 @functools.lru_cache(maxsize=1)
 def run_parser() -> argparse.ArgumentParser:
     """The ``run`` command's parser (raising on errors)."""
-    try:
-        from motok_robot.pipeline.cli import register
-    except ImportError:  # before the pipeline became a package
-        from motok_robot.pipeline_cli import register
+    from motok_robot.pipeline.cli import register
 
     commands = _RaisingParser(prog="motok-robot").add_subparsers()
     register(commands, {})
@@ -105,51 +99,26 @@ def parse(argv, where: str = "run options") -> argparse.Namespace:
 
 def has_constraints(args: argparse.Namespace) -> bool:
     """The options lay kinematic constraints on generation (``--trajectory`` and the like)."""
-    try:
-        from motok_robot.control.options import has_control
-    except ModuleNotFoundError:  # pragma: no cover - control stage not installed
-        return False
-    return has_control(args)
+    from motok_robot.pipeline.cli import _has_control
+
+    return _has_control(args)
 
 
 def pipeline_config(args: argparse.Namespace, plots: bool = False):
-    """The :class:`~motok_robot.pipeline.PipelineConfig` of parsed ``run`` options (as ``run`` builds it)."""
-    from motok_robot.pipeline import PipelineConfig
-    from retarget.cli import balance_config
+    """The :class:`~motok_robot.pipeline.PipelineConfig` of parsed ``run`` options (as ``run`` builds
+    it, with the spec's ``plots`` and no simulated-playback video)."""
+    from motok_robot.pipeline.cli import pipeline_config as run_pipeline_config
 
-    generation = {"cfg_scale": args.cfg} if args.cfg is not None else {}
-    return PipelineConfig(planner=args.planner, tokenizer_run=args.tokenizer, planner_run=args.planner_run,
-                          device=args.device, generation=generation, plots=plots, realtime=args.realtime,
-                          sim_video=False, max_retime=args.max_retime, balance_zmp_weight=args.balance_zmp_weight,
-                          balance_acceleration_weight=args.balance_acceleration_weight,
-                          retarget=balance_config(args), feasibility=feasibility_config(args))
-
-
-def feasibility_config(args: argparse.Namespace):
-    """The feasibility stage's settings of ``--feasible`` / ``--feasible-retime`` (None: off)."""
-    if not args.feasible:
-        if args.feasible_retime != 1.0:
-            raise InputError("--feasible-retime needs --feasible")
-        return None
-    from motok_robot.feasibility.config import FeasibilityConfig
-
-    return FeasibilityConfig(retime=args.feasible_retime)
+    return run_pipeline_config(args, plots=plots, sim_video=False)
 
 
 def run_arguments(args: argparse.Namespace) -> dict:
     """The keyword arguments of ``Pipeline.run`` that parsed ``run`` options give (no render, no hardware)."""
+    from motok_robot.pipeline.cli import constraint_arguments
     from motok_robot.text.prompts import check_seconds
 
-    seconds = check_seconds(args.seconds, "--seconds")
-    constraints = control = None
-    if has_constraints(args):
-        from motok_robot.control.options import constraints_from_args, control_config_from_args
-        from motok_robot.pipeline import DEFAULT_CONSTRAINED_SECONDS
-
-        seconds = seconds or DEFAULT_CONSTRAINED_SECONDS
-        constraints = constraints_from_args(args, round(seconds * 20))
-        control = control_config_from_args(args)
-    return dict(seconds=seconds, playback="sim" if args.sim else "dry-run", constraints=constraints, control=control,
+    seconds, constraints, control = constraint_arguments(args, check_seconds(args.seconds, "--seconds"))
+    return dict(seconds=seconds, playback="sim" if args.sim else "none", constraints=constraints, control=control,
                 control_path=getattr(args, "control_path", "both"), skeleton=args.skeleton, render=False)
 
 
