@@ -83,7 +83,8 @@ def torso_push(index, qpos: np.ndarray, fps: float, direction: str, fraction: fl
 
 def validate_perturbed(trajectory, index, perturbation: dict, mode: str, models: dict):
     """``validate_trajectory`` of ``trajectory`` with ``perturbation``'s physics, ``mode``
-    closed or open loop; ``models`` caches the varied servo models by (stiffness, mass)."""
+    closed or open loop; ``models`` caches the varied servo models by (stiffness, mass)
+    (``varied_model`` builds them with ``servo_model``'s defaults, which are ``ValidationConfig``'s)."""
     from motok_robot.feasibility import BalanceConfig
     from motok_robot.sim.validate import validate_trajectory
 
