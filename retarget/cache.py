@@ -1,3 +1,4 @@
+# Size (456 lines): one cache life cycle (key, build, verify, load, fall back) kept in one place.
 """On-disk cache of compiled window problems (C code from CasADi, built with the system compiler).
 
 A window problem (:class:`retarget.problem.WindowProblem`) is four NLP functions (objective and

@@ -1,3 +1,4 @@
+# Size (497 lines): the 263-d feature layout and its inverse, which must change together.
 """HumanML3D's 263-d motion features, computed from joint positions (numpy only).
 
 The feature space is HumanML3D's own (Guo et al., CVPR 2022), so a model trained on

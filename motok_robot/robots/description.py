@@ -1,3 +1,4 @@
+# Size (452 lines): one file format: its dataclasses, parser and checks change together.
 """Robot description files (``models/mjcf/NAME.toml``): dataclasses, parsing and checks.
 
 A description says, once for every later stage, which robot site stands for which human joint,

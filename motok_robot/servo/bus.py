@@ -1,3 +1,4 @@
+# Size (588 lines): the ServoBus seam and its one real implementation, DynamixelBus, side by side.
 """The servo bus seam: one :class:`ServoBus` interface and the real :class:`DynamixelBus`.
 
 Everything that talks to servos goes through :class:`ServoBus`.  Positions cross it as integer

@@ -1,3 +1,4 @@
+# Size (630 lines): one emulated device: control table, Protocol 2.0 packet parsing and the servo model.
 """An emulated chain of Dynamixel X-series servos, as an in-memory ``dynamixel_sdk.PortHandler``.
 
 Give :class:`EmulatedServoChain` to :class:`~motok_robot.servo.bus.DynamixelBus` as its

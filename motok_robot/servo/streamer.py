@@ -1,3 +1,4 @@
+# Size (937 lines): not split yet: the report gate and trajectory loading (Trajectory .. plan_targets) should become their own module.
 """Stream a validated ``robot.npz`` to a servo bus at a fixed rate, failing safe.
 
 Sequence (:func:`play_file`):

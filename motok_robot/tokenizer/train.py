@@ -1,3 +1,4 @@
+# Size (475 lines): one resumable training loop and the state it saves.
 """Training of a MoTok tokenizer: windows of motion features -> AdamW on the tokenizer losses.
 
 Deterministic given ``TrainConfig.seed``: the initialisation uses ``torch.manual_seed(seed)``
