@@ -22,9 +22,8 @@ import numpy as np
 
 from motok_robot.errors import InputError
 from motok_robot.export.progress import write_rows
+from motok_robot.servo.trajectory import FREE_BASE  # qpos columns of the free base (position, quaternion wxyz)
 
-#: qpos columns of the free base: position (3) + quaternion w, x, y, z (4)
-FREE_BASE = 7
 ROOT_COLUMNS = ("root_x_m", "root_y_m", "root_z_m", "root_qw", "root_qx", "root_qy", "root_qz")
 
 

@@ -5,7 +5,8 @@
 * :mod:`~motok_robot.servo.imu`: the torso IMU on the bus (the OP3's OpenCR at ID 200).
 * :mod:`~motok_robot.servo.sim_rig`: the MuJoCo model as a servo bus.
 * :mod:`~motok_robot.servo.convert`: radians <-> ticks and the per-tick safety limiter.
-* :mod:`~motok_robot.servo.streamer`: report gate, pre-flight, fixed-rate streaming, safe stop.
+* :mod:`~motok_robot.servo.trajectory`: the report gate and what is played (validated goals).
+* :mod:`~motok_robot.servo.streamer`: pre-flight, fixed-rate streaming, safe stop.
 
 The names below load on first use, so ``motok-robot`` commands that never touch a servo (training
 and evaluation on a GPU box, say) do not need ``dynamixel_sdk`` installed.
@@ -26,11 +27,11 @@ _WHERE = {
     "limit_command": "convert",
     "PlaybackInterrupted": "streamer",
     "PlaybackResult": "streamer",
-    "PlaybackWarning": "streamer",
+    "PlaybackWarning": "trajectory",
     "Streamer": "streamer",
-    "Trajectory": "streamer",
-    "check_validation_report": "streamer",
-    "load_trajectory": "streamer",
+    "Trajectory": "trajectory",
+    "check_validation_report": "trajectory",
+    "load_trajectory": "trajectory",
     "play_file": "streamer",
 }
 

@@ -140,7 +140,7 @@ def find_validation_report(trajectory: Path, report: str | None = None,
     --out DIR`` leaves it (a passing one first, then the newest); else the report beside it
     when there is one (the gate explains why it does not fit), else None and why.
     """
-    from motok_robot.servo.streamer import _sha256
+    from motok_robot.servo.trajectory import _sha256
 
     if report:
         return Path(report), ""
@@ -174,7 +174,7 @@ def find_validation_report(trajectory: Path, report: str | None = None,
 
 def missing_goals_reason(trajectory: Path, report_path: Path | None, description_sha256: str) -> str:
     """Why playback has no validated servo goals for ``trajectory`` (one phrase)."""
-    from motok_robot.servo.streamer import _sha256
+    from motok_robot.servo.trajectory import _sha256
 
     if report_path is None or not Path(report_path).is_file():
         return "no validation report"
