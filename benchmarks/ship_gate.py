@@ -68,6 +68,8 @@ MAX_ROBOT_SEEDS = 100
 MAX_BEHAVIOUR_SEEDS = 10_000
 MAX_REPEATS = 100
 MAX_SUMMARY_BYTES = 16 * 1024 * 1024
+#: seconds between the "still running" lines of a long child
+HEARTBEAT_S = 300
 SHIP, NO_SHIP = "SHIP", "DO NOT SHIP"
 
 
@@ -360,8 +362,16 @@ def run_part(work: Path, part: Part, index: int, total: int) -> int:
     with open(log, "w", encoding="utf-8") as fh:
         fh.write(part.shown() + "\n")
         fh.flush()
-        rc = subprocess.run(child_argv(part.argv), cwd=REPO_ROOT, env=child_env(part), stdout=fh,
-                            stderr=subprocess.STDOUT).returncode
+        child = subprocess.Popen(child_argv(part.argv), cwd=REPO_ROOT, env=child_env(part), stdout=fh,
+                                 stderr=subprocess.STDOUT)
+        try:
+            while (rc := _wait(child, HEARTBEAT_S)) is None:
+                print(f"[{index}/{total}] {part.what}: still running, {(time.monotonic() - start) / 60:.0f} min; "
+                      f"log: {_last_line(log)}", flush=True)
+        except BaseException:  # Ctrl-C or a kill of the gate: stop the child too; the part stays unfinished
+            child.terminate()
+            child.wait()
+            raise
     seconds = time.monotonic() - start
     done = done_file(work, part)
     done.parent.mkdir(parents=True, exist_ok=True)
@@ -371,6 +381,22 @@ def run_part(work: Path, part: Part, index: int, total: int) -> int:
     print(f"[{index}/{total}] {part.what}: {'done' if rc == 0 else f'FAILED (exit {rc}, see {log})'} "
           f"in {seconds / 60:.1f} min", flush=True)
     return rc
+
+
+def _wait(child: subprocess.Popen, seconds: float) -> int | None:
+    try:
+        return child.wait(timeout=seconds)
+    except subprocess.TimeoutExpired:
+        return None
+
+
+def _last_line(log: Path, limit: int = 4096) -> str:
+    """The last non-empty line of a log (progress bars end their updates with a carriage return)."""
+    with open(log, "rb") as fh:
+        fh.seek(max(0, log.stat().st_size - limit))
+        tail = fh.read().decode("utf-8", "replace")
+    lines = [ln.strip() for ln in tail.replace("\r", "\n").splitlines() if ln.strip()]
+    return lines[-1][:160] if lines else "(empty)"
 
 
 def link_candidate_models(setup: Setup) -> None:

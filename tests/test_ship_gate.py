@@ -327,3 +327,18 @@ def test_publishing_the_shipped_side_feeds_the_readme_tables(setup, tmp_path, mo
     assert span == "0-95" and counts["masked"]["bow"] == 80 and counts["ar"]["bow"] == 96
     robot = json.loads((results / sg.rt.ROBOT_EIGHT).read_text())
     assert [r["text"] for r in robot["rows"]] == PROMPTS
+
+
+def test_a_child_runs_logs_and_is_recorded_only_when_it_succeeds(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(sg, "HEARTBEAT_S", 0.05)
+    work = tmp_path / "work"
+    out = tmp_path / "made.txt"
+    ok = sg.Part("ok", "a child", ["python", "-c", f"import os, time; time.sleep(0.3); print(os.environ['OMP_NUM_THREADS']); "
+                                   f"open({str(out)!r}, 'w').write('x')"], {}, out)
+    assert sg.run_part(work, ok, 1, 2) == 0 and sg.finished(work, ok)
+    assert (work / "logs" / "ok.log").read_text().splitlines()[-1] == "1"  # one thread
+    assert "still running" in capsys.readouterr().out
+    bad = sg.Part("bad", "a failing child", ["python", "-c", "raise SystemExit(3)"], {}, tmp_path)
+    assert sg.run_part(work, bad, 2, 2) == 3 and not sg.finished(work, bad)
+    changed = sg.Part("ok", "a child", [*ok.argv[:-1], "print(1)"], {}, out)
+    assert not sg.finished(work, changed)  # another command is not the finished part
