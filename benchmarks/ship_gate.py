@@ -1,3 +1,4 @@
+# Size (770 lines): one decision: the rules file, the commands it fixes, the files they write and the verdicts read the same field names.
 """Ship gate: measure a candidate tokenizer + planner beside the shipped models and say SHIP or DO NOT SHIP.
 
 Run: python benchmarks/ship_gate.py --candidate-tokenizer RUN --candidate-planner RUN [--planner masked|ar]
