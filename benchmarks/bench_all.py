@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import REPO_ROOT, RESULTS_DIR, machine_description, machine_summary, markdown_table  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
-NOT_BENCHMARKS = {"bench_all", "common", "__init__"}
+NOT_BENCHMARKS = {"bench_all", "common", "__init__", "readme_table", "ship_gate", "build_vocabulary"}  # tools, not benchmarks
 EXPERIMENT_PREFIX = "ablate_"  # ablation studies train models: only run when named with --only
 
 
