@@ -35,6 +35,8 @@ from common import REPO_ROOT, RESULTS_DIR, write_json  # noqa: E402
 
 MODELS = REPO_ROOT / "models"
 ROBOT_EIGHT = "robot_eight.json"
+#: the same prompts over seeds 0-4 (optional: the row is left out without it)
+ROBOT_SEEDS = "robot_eight_seeds0-4.json"
 GENERATION = {"masked": "generation_masked.json", "ar": "generation_ar.json"}
 BEHAVIOUR = ("planner_behaviour.json", "planner_behaviour_seeds48-95.json")
 RECONSTRUCTION = {"val split": "reconstruct_val.json", "test split": "reconstruct_test.json",
@@ -49,6 +51,8 @@ PLAYBACK = {"SCHED_FIFO": "bench_playback_fifo.json", "normal priority": "bench_
 WRITTEN_BY = {
     ROBOT_EIGHT: "motok-robot run --prompts examples/prompts_eight.txt --no-render --out OUT, then "
                  "python benchmarks/readme_table.py --import-batch OUT",
+    ROBOT_SEEDS: "motok-robot run --prompts examples/prompts_eight.txt --seed S --no-render --no-plots --out OUT_S "
+                 "for S in 0-4, then readme_table.import_batches([OUT_0, ..., OUT_4], ...) (or ship_gate.py)",
     **{name: f"motok-robot eval generation --data runs/prepared --planner {kind} --repeats 5 --mm-texts 20 "
              f"--mm-repeats 10 --no-train-reference --json benchmarks/results/{name}" for kind, name in GENERATION.items()},
     BEHAVIOUR[0]: "python benchmarks/planner_behaviour.py --seeds 48 --data runs/prepared",
@@ -247,6 +251,18 @@ def table_readme(results: Path, shipped: dict[str, str]) -> str:
                  "every default: clips passing every check",
                  f"**{len(passed)} of {len(robot)}**" + (f" (failing: {fails})" if fails else ""),
                  measured_on(robot_data, with_load=False), source(ROBOT_EIGHT)))
+    if (results / ROBOT_SEEDS).is_file():
+        seeds_data = load(ROBOT_SEEDS, results)
+        cells = seeds_data["rows"]
+        seeds = sorted({int(r["seed"]) for r in cells})
+        per_prompt = {}
+        for r in cells:
+            per_prompt[r["text"]] = per_prompt.get(r["text"], 0) + truthy(r.get("passed"))
+        worst = ", ".join(f"{_short(t)} {n}/{len(seeds)}" for t, n in per_prompt.items() if n < len(seeds))
+        rows.append(("text → robot, `op3_like`", f"the same prompts over seeds {seeds[0]}-{seeds[-1]}, every default",
+                     f"**{sum(truthy(r.get('passed')) for r in cells)} of {len(cells)}**"
+                     + (f" (fewer than every seed: {worst})" if worst else ""),
+                     measured_on(seeds_data, with_load=False), source(ROBOT_SEEDS)))
     reference, planners = generation_rows(results, shipped)
     real = reference.get("real (test)")
     for kind, row in planners.items():
