@@ -25,3 +25,18 @@ def shared_datasets() -> Path:
     if not (SHARED_DATASETS / "README.md").exists():
         pytest.skip(f"shared datasets not found at {SHARED_DATASETS}")
     return SHARED_DATASETS
+
+
+def pytest_addoption(parser):
+    parser.addoption("--run-slow", action="store_true", default=False,
+                     help="also run the tests marked slow (what CI and the README's test command run)")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Without --run-slow, tests marked ``slow`` are deselected: plain ``pytest`` is the fast suite."""
+    if config.getoption("--run-slow") or config.option.markexpr:
+        return  # an explicit -m expression decides by itself
+    slow = [item for item in items if item.get_closest_marker("slow") is not None]
+    if slow:
+        config.hook.pytest_deselected(items=slow)
+        items[:] = [item for item in items if item.get_closest_marker("slow") is None]

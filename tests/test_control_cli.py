@@ -223,6 +223,7 @@ def test_planner_package_does_not_import_the_control_stage_and_help_lists_option
         assert option in text, option
 
 
+@pytest.mark.slow  # about 10 s
 def test_eval_control_protocol_on_tiny_models(runs, tmp_path, capsys):
     out = tmp_path / "control.json"
     argv = ["eval", "control", "--data", str(runs / "data"), "--clips", "2", "--scenes", "2", "--json", str(out)] + FAST + _models(runs)

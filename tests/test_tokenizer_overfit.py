@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 from motok_robot.motion.features import features_from_joints
@@ -12,6 +13,7 @@ from motok_robot.tokenizer import TokenizerConfig, TrainConfig, load_tokenizer
 from motok_robot.tokenizer.train import Clips, train_tokenizer
 
 
+@pytest.mark.slow  # about 45 s on 2 cores
 def test_tiny_tokenizer_overfits_a_handful_of_clips(tmp_path):
     torch.set_num_threads(1)
     features = [
