@@ -140,13 +140,13 @@ def find_validation_report(trajectory: Path, report: str | None = None,
     --out DIR`` leaves it (a passing one first, then the newest); else the report beside it
     when there is one (the gate explains why it does not fit), else None and why.
     """
-    from motok_robot.servo.trajectory import _sha256
+    from motok_robot.servo.trajectory import file_sha256
 
     if report:
         return Path(report), ""
     trajectory = Path(trajectory)
     beside = trajectory.with_name("report.json")
-    digest = _sha256(trajectory)
+    digest = file_sha256(trajectory)
     beside_report = _read_report(beside) if beside.is_file() else None
     if beside_report is not None and _validated_digest(beside_report) in (digest, None):
         return beside, ""
@@ -174,7 +174,7 @@ def find_validation_report(trajectory: Path, report: str | None = None,
 
 def missing_goals_reason(trajectory: Path, report_path: Path | None, description_sha256: str) -> str:
     """Why playback has no validated servo goals for ``trajectory`` (one phrase)."""
-    from motok_robot.servo.trajectory import _sha256
+    from motok_robot.servo.trajectory import file_sha256
 
     if report_path is None or not Path(report_path).is_file():
         return "no validation report"
@@ -184,7 +184,7 @@ def missing_goals_reason(trajectory: Path, report_path: Path | None, description
     validated = _validated_digest(report)
     if validated is None:
         return f"{report_path} records no sha256 of the file it validated"
-    if validated != _sha256(Path(trajectory)):
+    if validated != file_sha256(Path(trajectory)):
         return f"{report_path} validated other content"
     record = report.get("servo_goals")
     if not isinstance(record, dict) or not record.get("file"):

@@ -148,7 +148,7 @@ def _validated_goals(path: Path, report_path: Path, robot_sha256: str | None = N
     digest = validated.get("sha256") if isinstance(validated, dict) else None
     if not isinstance(record, dict) or not record.get("file") or not isinstance(digest, str):
         return None
-    if _sha256(path) != digest.lower():
+    if file_sha256(path) != digest.lower():
         return None
     if robot_sha256 is not None and _description_problem(report, report_path, robot_sha256) is not None:
         return None
@@ -200,7 +200,7 @@ def check_validation_report(trajectory_path: str | Path, report_path: str | Path
             elif robot_name and report.get("robot") and str(report["robot"]) != robot_name:
                 problem = f"validation report {path} is for robot '{report['robot']}', not '{robot_name}'"
             elif digest is not None:  # the content decides, whatever the file is called now
-                if not trajectory_path.is_file() or _sha256(trajectory_path) != digest.lower():
+                if not trajectory_path.is_file() or file_sha256(trajectory_path) != digest.lower():
                     problem = (f"validation report {path} is for different content (sha256 {digest[:12]}...): "
                                f"{trajectory_path.name} changed after it was validated")
             elif validated is not None and Path(validated).name != trajectory_path.name:
@@ -230,7 +230,8 @@ def _description_problem(report: dict, path: Path, robot_sha256: str) -> str | N
     return None
 
 
-def _sha256(path: Path) -> str:
+def file_sha256(path: Path) -> str:
+    """Hex sha256 of the file's bytes (what a report's ``input.sha256`` records)."""
     digest = hashlib.sha256()
     with open(path, "rb") as handle:
         for block in iter(lambda: handle.read(1 << 20), b""):
