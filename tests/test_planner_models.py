@@ -287,6 +287,11 @@ def test_action_labels_from_index_records():
     assert clip_action({"label": "kick", "source": "bandai"}) == "kick"
     assert clip_action({"source": "bandai", "file": "/d/dataset-2_wave-right-hand_active_003.bvh"}) == "wave-right-hand"
     assert clip_action({"source": "cmu", "file": "/d/01_01.amc"}) is None
+    # a mirrored clip shows the other side, as its texts say
+    mirror = {"source": "bandai", "file": "/d/dataset-1_walk-turn-left_normal_001.bvh", "mirror_of": "bandai/x"}
+    assert clip_action(mirror) == "walk-turn-right"
+    assert clip_action({"label": "raise-up-Right-hand", "mirror_of": "cmu/y"}) == "raise-up-left-hand"
+    assert clip_action({"action": "wave", "mirror_of": "cmu/y"}) == "wave"
 
 
 def test_ar_input_corruption_changes_inputs_not_targets(monkeypatch):

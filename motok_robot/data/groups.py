@@ -21,21 +21,35 @@ from motok_robot.errors import InputError
 _BANDAI_NAME = re.compile(r"dataset-[12]_(?P<content>[a-z-]+)_[a-z-]+_\d+", re.IGNORECASE)
 
 
+_SIDE = re.compile(r"\b(left|right)\b", re.IGNORECASE)
+
+
+def _mirrored(label: str) -> str:
+    """``label`` with the words left and right swapped (``walk-turn-left`` -> ``walk-turn-right``)."""
+    return _SIDE.sub(lambda m: {"left": "right", "right": "left"}[m.group(1).lower()], label)
+
+
 def clip_action(record: dict) -> str | None:
     """The action label of an index record, if any.
 
     The record's ``action`` or ``label`` field; for Bandai Namco clips without one, the content
-    label of the file name (``dataset-1_{content}_{style}_{NNN}.bvh``, e.g. ``walk-left``).
+    label of the file name (``dataset-1_{content}_{style}_{NNN}.bvh``, e.g. ``walk-left``).  A
+    mirrored clip (``mirror_of`` set) shows the other side: left and right swap in its label,
+    as they do in its texts (a mirrored walk-turn-left turns right).
     """
+    label = None
     for key in ("action", "label"):
         value = record.get(key)
         if isinstance(value, str) and value.strip():
-            return value.strip()
-    if record.get("source") == "bandai":
+            label = value.strip()
+            break
+    if label is None and record.get("source") == "bandai":
         match = _BANDAI_NAME.search(Path(str(record.get("file", ""))).name)
         if match:
-            return match.group("content").lower()
-    return None
+            label = match.group("content").lower()
+    if label is not None and record.get("mirror_of"):
+        label = _mirrored(label)
+    return label
 
 
 def clip_group(record: dict, clip_id: str) -> tuple[str, str]:
