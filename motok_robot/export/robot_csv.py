@@ -83,7 +83,7 @@ def read_goals_for(table: RobotTable, goals_path: str | Path, expected_sha256: s
     """The servo goals of ``goals_path`` (servo_goals.npz) as ``[T, nj]`` in ``table``'s joint
     order; they must have been computed from this very robot.npz (``source_sha256``), with its
     frames and fps, and (``expected_sha256``, from report.json) be the validated ones."""
-    from motok_robot.feasibility.feedforward import load_servo_goals
+    from motok_robot.feasibility.feedforward import goals_for_joints, load_servo_goals
 
     goals_path = Path(goals_path)
     if not goals_path.is_file():
@@ -93,15 +93,7 @@ def read_goals_for(table: RobotTable, goals_path: str | Path, expected_sha256: s
         raise InputError(f"{goals_path}: field 'source_sha256' says the goals were computed from other content "
                          f"than {table.path} (sha256 {goals['source_sha256'][:12]}..., the file is "
                          f"{table.sha256[:12]}...)")
-    array = goals["goals"]
-    if array.shape[0] != table.qpos.shape[0] or abs(goals["fps"] - table.fps) > 1e-9:
-        raise InputError(f"{goals_path}: field 'goals' has {array.shape[0]} frames at {goals['fps']:g} fps, "
-                         f"{table.path} has {table.qpos.shape[0]} at {table.fps:g}")
-    where = {n: i for i, n in enumerate(goals["joint_names"])}
-    lacking = [n for n in table.joint_names if n not in where]
-    if lacking:
-        raise InputError(f"{goals_path}: field 'joint_names' lacks {', '.join(lacking[:5])} of {table.path}")
-    return array[:, [where[n] for n in table.joint_names]]
+    return goals_for_joints(goals, table.joint_names, table.qpos.shape[0], table.fps, goals_path, table.path)
 
 
 def csv_columns(joint_names: list[str], goals: bool = False) -> list[str]:

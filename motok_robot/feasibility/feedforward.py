@@ -145,3 +145,18 @@ def load_servo_goals(path: str | Path, *, expected_sha256: str | None = None) ->
     return {"goals": goals, "joint_names": names, "fps": float(fields["fps"]),
             "robot": str(fields.get("robot", "")), "mode": mode, "source_sha256": str(fields.get("source_sha256", "")),
             "plan": plan}
+
+
+def goals_for_joints(goals: dict, joints, frames: int, fps: float, where, of) -> np.ndarray:
+    """The goal array of ``goals`` (as :func:`load_servo_goals` returns it) as ``[frames,
+    len(joints)]`` in the order of ``joints``; InputError naming ``where`` (the goals file) when its
+    frames, fps or joint names do not fit ``of`` (the trajectory they are played with)."""
+    array = goals["goals"]
+    if array.shape[0] != frames or abs(goals["fps"] - fps) > 1e-9:
+        raise InputError(f"{where}: field 'goals' has {array.shape[0]} frames at {goals['fps']:g} fps, "
+                         f"{of} has {frames} at {fps:g}")
+    index = {n: i for i, n in enumerate(goals["joint_names"])}
+    lacking = [n for n in joints if n not in index]
+    if lacking:
+        raise InputError(f"{where}: field 'joint_names' lacks {', '.join(lacking[:5])} of {of}")
+    return array[:, [index[n] for n in joints]]

@@ -118,14 +118,9 @@ def load_trajectory(path: str | Path, servo_map: ServoMap, robot_name: str | Non
     report_path = Path(report_path) if report_path is not None else path.with_name("report.json")
     goals = _validated_goals(path, report_path, robot_sha256)
     if goals is not None:
-        if goals["goals"].shape[0] != qpos.shape[0] or abs(goals["fps"] - fps) > 1e-9:
-            raise InputError(f"{goals['path']}: {goals['goals'].shape[0]} frames at {goals['fps']} fps, "
-                             f"but {path} has {qpos.shape[0]} at {fps}")
-        where = {n: i for i, n in enumerate(goals["joint_names"])}
-        lacking = [j for j in servo_map.joints if j not in where]
-        if lacking:
-            raise InputError(f"{goals['path']}: joint_names lacks the servo joint(s) {', '.join(lacking)}")
-        trajectory.q = goals["goals"][:, [where[j] for j in servo_map.joints]].copy()
+        from motok_robot.feasibility.feedforward import goals_for_joints
+
+        trajectory.q = goals_for_joints(goals, servo_map.joints, qpos.shape[0], fps, goals["path"], path).copy()
         trajectory.goals = goals["mode"]
         trajectory.plan = goals.get("plan")  # the balance plan validated with these goals
         trajectory.plan_joints = tuple(goals["joint_names"])
