@@ -110,7 +110,7 @@ def run_command(args: argparse.Namespace) -> int:
         raise InputError("--sim-video needs --sim")
     if args.force and not args.port:
         raise InputError("--force only applies to hardware playback (--port DEV)")
-    control = _has_control(args)
+    control = has_constraints(args)
     seconds, seed = check_seconds(args.seconds, "--seconds"), check_seed(args.seed, "--seed")
     if args.prompts is not None:
         if args.text is not None:
@@ -148,7 +148,8 @@ def run_command(args: argparse.Namespace) -> int:
     return 0 if result.ok else 1
 
 
-def _has_control(args: argparse.Namespace) -> bool:
+def has_constraints(args: argparse.Namespace) -> bool:
+    """The options lay kinematic constraints on generation (``--trajectory`` and the like)."""
     try:
         from motok_robot.control.options import has_control
     except ModuleNotFoundError:  # pragma: no cover
@@ -211,7 +212,7 @@ def constraint_arguments(args: argparse.Namespace, seconds: float | None):
     """``(seconds, constraints, control config)`` of the constraint options (``--trajectory`` and
     the like; both None without them): constrained clips default to
     :data:`~motok_robot.pipeline.DEFAULT_CONSTRAINED_SECONDS`."""
-    if not _has_control(args):
+    if not has_constraints(args):
         return seconds, None, None
     from motok_robot.control.options import constraints_from_args, control_config_from_args
     from motok_robot.pipeline import DEFAULT_CONSTRAINED_SECONDS

@@ -97,13 +97,6 @@ def parse(argv, where: str = "run options") -> argparse.Namespace:
         raise InputError(f"{where}: {exc}") from None
 
 
-def has_constraints(args: argparse.Namespace) -> bool:
-    """The options lay kinematic constraints on generation (``--trajectory`` and the like)."""
-    from motok_robot.pipeline.cli import _has_control
-
-    return _has_control(args)
-
-
 def pipeline_config(args: argparse.Namespace, plots: bool = False):
     """The :class:`~motok_robot.pipeline.PipelineConfig` of parsed ``run`` options (as ``run`` builds
     it, with the spec's ``plots`` and no simulated-playback video)."""
@@ -125,6 +118,7 @@ def run_arguments(args: argparse.Namespace) -> dict:
 def check_variants(spec) -> None:
     """Every variant's settings make a valid pipeline for its cells, checked before any work."""
     from motok_robot.pipeline import Pipeline
+    from motok_robot.pipeline.cli import has_constraints
 
     for name, variant in spec.variants.items():
         where = f"{spec.path}: field 'variants.{name}'"
