@@ -133,8 +133,7 @@ def run(args: argparse.Namespace) -> int:
         f"  keypoint error mean {m.keypoint_error_mean * 100:.2f} cm; {m.contact_phases} contact phases, sole drift max "
         f"{m.sole_drift_max * 1000:.2f} mm, lowest sole corner {m.sole_min_height * 1000:.2f} mm\n"
         f"  joint range excess {m.joint_range_excess:.2e} rad, max velocity {m.velocity_ratio_max * 100:.0f}% of limit, "
-        f"mean joint acceleration {m.joint_acceleration_mean:.1f} rad/s^2\n"
-        f"  largest turn between frames: base {m.base_turn_max:.1f} deg, planted sole {m.planted_sole_turn_max:.1f} deg"
+        f"mean joint acceleration {m.joint_acceleration_mean:.1f} rad/s^2"
     )
     if result.collision_pairs:
         print(f"  self-collision: {len(result.collision_pairs)} geom pairs came close and were kept apart in "

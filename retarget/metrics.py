@@ -22,11 +22,7 @@ class TrajectoryMetrics:
     the start of its contact phase; ``sole_min_height`` m: lowest sole corner over all frames
     (relative to the ground); ``joint_range_excess`` rad: largest amount a joint leaves its range
     (0 = never); ``velocity_ratio_max``: largest |joint velocity| / velocity limit;
-    ``joint_acceleration_mean`` rad/s^2: mean |finite-difference joint acceleration|;
-    ``base_turn_max`` degrees: the largest base rotation between consecutive frames (what
-    ``motok-robot validate``'s ``base_continuity`` check bounds); ``planted_sole_turn_max``
-    degrees: the largest turn of a sole about the vertical between two frames in which it is
-    planted in both (a flip reads 180; a pivot, ``retarget.pivot``, the person's turn).
+    ``joint_acceleration_mean`` rad/s^2: mean |finite-difference joint acceleration|.
     """
 
     frames: int
@@ -37,8 +33,6 @@ class TrajectoryMetrics:
     joint_range_excess: float
     velocity_ratio_max: float
     joint_acceleration_mean: float
-    base_turn_max: float = 0.0
-    planted_sole_turn_max: float = 0.0
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -66,26 +60,6 @@ def sole_drift(kin, x: np.ndarray, contacts: np.ndarray) -> tuple[float, int]:
     return worst, count
 
 
-def base_turns(x: np.ndarray) -> np.ndarray:
-    """Angle (degrees) of the base rotation between consecutive frames of ``x[T, nx]``, ``[T-1]``."""
-    from retarget.problem import quat_from_euler_zyx
-
-    q = quat_from_euler_zyx(np.asarray(x, dtype=np.float64)[:, 3:6])
-    dot = np.abs(np.sum(q[1:] * q[:-1], axis=1))
-    return np.degrees(2.0 * np.arccos(np.clip(dot, 0.0, 1.0)))
-
-
-def planted_sole_turns(kin, x: np.ndarray, contacts: np.ndarray) -> np.ndarray:
-    """Turn (degrees, ``>= 0``) of each sole's forward axis about the vertical between frame
-    ``t - 1`` and ``t``, ``[T-1, 2]``; 0 where the sole is not planted in both frames."""
-    T = len(x)
-    fwd = np.array(kin.frame.map(T)(np.asarray(x).T)[2]).reshape(3, 2, T, order="F").transpose(2, 1, 0)
-    yaw = np.arctan2(fwd[..., 1], fwd[..., 0])
-    turn = np.degrees(np.abs(np.angle(np.exp(1j * np.diff(yaw, axis=0)))))
-    c = np.asarray(contacts, dtype=bool)
-    return np.where(c[1:] & c[:-1], turn, 0.0)
-
-
 def measure(kin, x: np.ndarray, contacts: np.ndarray, keypoint_error: np.ndarray, fps: float, ground: float = 0.0) -> TrajectoryMetrics:
     robot = kin.robot
     x = np.asarray(x, dtype=np.float64)
@@ -106,6 +80,4 @@ def measure(kin, x: np.ndarray, contacts: np.ndarray, keypoint_error: np.ndarray
         joint_range_excess=excess,
         velocity_ratio_max=ratio,
         joint_acceleration_mean=float(acc.mean()) if acc.size else 0.0,
-        base_turn_max=float(base_turns(x).max()) if len(x) > 1 else 0.0,
-        planted_sole_turn_max=float(planted_sole_turns(kin, x, contacts).max()) if len(x) > 1 else 0.0,
     )
