@@ -29,10 +29,6 @@ class ContactConfig:
     ``"always"`` plants the lower foot in every such frame (a run becomes a fast walk).  A
     servo humanoid cannot glide on a sliding sole, and a robot with both soles 2 cm up fails
     ``motok-robot validate``'s floating check.
-
-    ``pivot_speed``: a person spinning on one foot turns that foot with the body; where the
-    heading turns faster than this, the robot's planted sole may turn about its site by as much
-    as the person turns on it (:mod:`retarget.pivot`); everywhere else it keeps its yaw.
     """
 
     toe_height: float = 0.06
@@ -47,9 +43,6 @@ class ContactConfig:
     #: at a hand-over from one foot to the other, keep the old foot planted until at least this many
     #: frames after the new one touches down (0 = as detected); see contacts.ensure_double_support
     min_double_support: int = 0
-    #: rad/s; where the human heading turns faster than this, a planted robot foot may turn with
-    #: the person's planted foot (a pivot, :mod:`retarget.pivot`); None = planted feet never turn
-    pivot_speed: float | None = 1.5
 
 
 @dataclass(frozen=True)

@@ -36,13 +36,9 @@ contact, the midpoint of both in double support.
 * per sole, 3 corner heights: ``= ground`` in contact (three corners fix the sole plane: on
   the ground and flat), ``>= ground`` otherwise, plus the 4th corner ``>= ground`` out of
   contact (in contact it lies on the plane of the other three);
-* per sole, no slip between consecutive contact frames: sole-site ``xy`` unchanged, and the
-  sine of the sole's turn about the vertical (cross product of a sole edge now and in the
-  previous frame, over its squared length) ``0``, or within ``+-sin(pivot)`` where the person
-  pivots on that foot (:mod:`retarget.pivot`); the cosine (their dot product) ``>= 0``, so a
-  planted sole never turns a quarter turn or more in one frame (the sine alone also holds
-  for a sole turned round by 180 degrees); chained across the seam to the committed frame
-  before the window;
+* per sole, no slip between consecutive contact frames: sole-site ``xy`` unchanged and the
+  sole edge direction unchanged (``cross_z = 0``); chained across the seam to the committed
+  frame before the window;
 * swing foot (bounds on the same rows, from :mod:`retarget.swing`): out of contact all four
   corners at least a clearance above the ground that rises from lift-off and falls to
   touch-down; in the swing frame next to a contact frame the corners lie in a thin band
@@ -270,8 +266,6 @@ class StageFunctions:
         kp_w = np.array([k.weight for k in robot.keypoints], dtype=np.float64)
         pos_scale = np.concatenate([np.full(3, 1.0 / L), np.ones(3 + nj)])  # velocity/accel in leg lengths
         nominal_j = kin.nominal_x[6:]
-        nominal_corners = np.array(kin.frame(kin.nominal_x)[3]).T.reshape(2, 4, 3)
-        edge_sq = np.sum((nominal_corners[:, 1] - nominal_corners[:, 0]) ** 2, axis=1)  # per sole (rigid)
         yaw_offset = kin.nominal_x[3]
         sq = np.sqrt
         xt, prev, prev2 = xs[0], xs[-1], xs[-2]
@@ -317,9 +311,8 @@ class StageFunctions:
             e_now = c[:2, 1] - c[:2, 0]
             pc = prev_corners[:, 4 * side_i : 4 * side_i + 4]
             e_prev = pc[:2, 1] - pc[:2, 0]
-            g.append((e_prev[0] * e_now[1] - e_prev[1] * e_now[0]) / edge_sq[side_i])  # sin of the turn
-            g.append((e_prev[0] * e_now[0] + e_prev[1] * e_now[1]) / edge_sq[side_i])  # cos of the turn
-            names += [f"{side} sole yaw slip", f"{side} sole turn"]
+            g.append(e_now[0] * e_prev[1] - e_now[1] * e_prev[0])
+            names += [f"{side} sole yaw slip"]
         # lateral distance of the left sole site from the right one, across the human heading
         d = sole[:2, 0] - sole[:2, 1]
         g.append(-ca.sin(heading) * d[0] + ca.cos(heading) * d[1])
@@ -543,7 +536,6 @@ class WindowProblem:
         flat_tolerance: float = 0.0,
         transition_step: float = np.inf,
         min_separation: float = -np.inf,
-        pivot: np.ndarray | None = None,
     ):
         """Bounds ``(lbg, ubg)`` for a window's contact mask ``[W, 2]`` and the contact state of the
         frame before it (``None`` = no committed frame before the window).
@@ -554,9 +546,7 @@ class WindowProblem:
         ``transition_step`` (m): largest horizontal sole-site move between a contact frame and
         the swing frame next to it (lift-off and touch-down; ``inf`` = free); ``min_separation``
         (m): smallest lateral distance of the left sole site from the right one, measured across
-        the human heading (``-inf`` = free; keeps the feet from crossing into each other);
-        ``pivot[W, 2]`` (rad, optional, ``< pi/2``): how far each planted sole may turn about the
-        vertical since the frame before (:func:`retarget.pivot.pivot_bounds`; None = not at all).
+        the human heading (``-inf`` = free; keeps the feet from crossing into each other).
         """
         nj = self.kin.nj
         lb, ub = [], []
@@ -583,9 +573,8 @@ class WindowProblem:
                     slip = transition_step
                 else:
                     slip = inf
-                turn = np.sin(float(pivot[t, s])) if pivot is not None else 0.0
-                lb.append(np.array([-slip, -slip, -inf if slip > 0 else -turn, -inf if slip > 0 else 0.0]))
-                ub.append(np.array([slip, slip, inf if slip > 0 else turn, inf]))
+                lb.append(np.array([-slip, -slip, -inf if slip > 0 else 0.0]))
+                ub.append(np.array([slip, slip, inf if slip > 0 else 0.0]))
             lb.append([min_separation])
             ub.append([inf])
             if self._n_clearance:
@@ -610,7 +599,6 @@ class WindowProblem:
         transition_step: float = np.inf,
         fps: float = 20.0,
         min_separation: float = -np.inf,
-        pivot: np.ndarray | None = None,
     ) -> WindowSolution:
         """Solve one window.
 
@@ -618,8 +606,7 @@ class WindowProblem:
         ``contacts[W, 2]`` bool; ``history[2, nx]`` the two committed frames before the window (or None);
         ``prev_contact[2]`` contact state of the frame before; ``vel_step[nj]`` max joint change per frame (rad);
         ``clearance[W, 2]``, ``flat[W, 2]``, ``flat_tolerance``, ``transition_step``: swing-foot
-        bounds, see :meth:`constraint_bounds`; ``fps`` frames per second (for the ZMP term);
-        ``pivot[W, 2]`` how far each planted sole may turn since the frame before (rad; None = 0).
+        bounds, see :meth:`constraint_bounds`; ``fps`` frames per second (for the ZMP term).
         """
         import time
 
@@ -637,7 +624,7 @@ class WindowProblem:
             ]
         )
         lbg, ubg = self.constraint_bounds(contacts, None if history is None else prev_contact, vel_step, ground,
-                                          clearance, flat, flat_tolerance, transition_step, min_separation, pivot)
+                                          clearance, flat, flat_tolerance, transition_step, min_separation)
         lbx, ubx = self.lbx.copy(), self.ubx.copy()
         yaw_ref = np.asarray(heading, dtype=np.float64).ravel() + self.kin.nominal_x[3]
         lbx[3::nx] = yaw_ref - self.solver_config.max_yaw_offset

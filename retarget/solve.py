@@ -23,7 +23,6 @@ from motok_robot.errors import InputError
 from motok_robot.motion.skeleton import JOINT_NAMES, leg_length, rest_pose
 from retarget.config import ContactConfig, RetargetConfig
 from retarget.contacts import detect_contacts, ensure_double_support, fill_support
-from retarget.pivot import pivot_bounds
 from retarget.problem import RobotKinematics, WindowProblem
 from retarget.robot_model import RetargetRobot
 from retarget.swing import swing_clearance, transition_frames
@@ -244,8 +243,7 @@ class Retargeter:
         kp_idx = [JOINT_NAMES.index(k.human_joint) for k in self.robot.keypoints]
         kp_targets = targets.joints[:, kp_idx, :]  # [T, K, 3]
         vel_step = self.robot.velocity_limit * cfg.velocity_margin / fps
-        swing = self._swing_bounds(contacts, fps)  # per-frame bounds for WindowProblem.solve, sliced per window
-        swing["pivot"] = pivot_bounds(targets.heading, targets.foot_dir, contacts, fps, contact_cfg)
+        swing = self._swing_bounds(contacts, fps)
 
         x = np.zeros((T, self.kin.nx))
         known = np.zeros(T, dtype=bool)  # frames with a solved value (committed or look-ahead)
