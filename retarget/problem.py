@@ -1,4 +1,4 @@
-# Size (669 lines): one optimisation problem; its costs and constraints share the per-frame symbols.
+# Size (656 lines): one optimisation problem; its costs and constraints share the per-frame symbols.
 """The per-window trajectory optimisation, built once per robot and window length.
 
 Decision variables, for each of the ``W`` frames of a window (``nx = 6 + nj`` per frame)::
