@@ -53,3 +53,18 @@ def retime(trajectory: RobotTrajectory, factor: float) -> RobotTrajectory:
         keypoint_error=_resample(np.asarray(trajectory.keypoint_error), t_old, t_new),
         source=_resample(np.asarray(trajectory.source), t_old, t_new).astype(np.float32),
         retime_factor=float(trajectory.retime_factor) * float(factor))
+
+
+def lead_in(trajectory: RobotTrajectory, skip: int, hold: int) -> RobotTrajectory:
+    """``trajectory`` without its first ``skip`` frames, its new first frame then held for
+    ``hold`` extra frames: a start from rest for a motion captured mid-stride (a robot cannot
+    start from rest on one foot, nor start walking without first shifting its weight)."""
+    T = trajectory.qpos.shape[0]
+    skip = int(np.clip(skip, 0, T - 1))
+    hold = max(0, int(hold))
+    if skip == 0 and hold == 0:
+        return replace(trajectory)
+    index = np.r_[np.full(hold, skip, dtype=int), np.arange(skip, T)]
+    return replace(
+        trajectory, qpos=np.asarray(trajectory.qpos)[index], contacts=np.asarray(trajectory.contacts)[index],
+        keypoint_error=np.asarray(trajectory.keypoint_error)[index], source=np.asarray(trajectory.source)[index])

@@ -143,6 +143,14 @@ class FeasibilityConfig:
 
     #: play the motion this many times slower (1 = human timing); recorded as the time warp
     retime: float = 1.0
+    #: regenerate stepping motion (:mod:`.gait`): footholds from the reference, double support
+    #: of at least ``gait_double_support_s``, a CoM path planned from the footholds' ZMP; motion
+    #: that does not step keeps the reference (and the ZMP shift below)
+    gait: bool = False
+    gait_double_support_s: float = 0.1
+    #: a walk whose first step comes sooner than this after its start (or that starts with a
+    #: foot in the air) gets a lead-in of standing on both feet first (s)
+    gait_lead_in_s: float = 0.6
     #: move the CoM so the cart-table ZMP stays on the planned feet (:mod:`.zmp_shift`)
     zmp_shift: bool = True
     #: how far inside the support polygon the shifted ZMP is kept (m)

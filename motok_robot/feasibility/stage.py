@@ -31,6 +31,7 @@ import numpy as np
 from motok_robot.feasibility.balance import BalancePlan, build_plan
 from motok_robot.feasibility.config import FeasibilityConfig
 from motok_robot.feasibility.dynamics import required_torque
+from motok_robot.feasibility.gait import generate_gait
 from motok_robot.feasibility.feedforward import GOALS_FILE, feedforward_goals, save_servo_goals, servo_gains
 from motok_robot.feasibility.physics import execute, servo_model
 from motok_robot.feasibility.refine import refine_goals
@@ -62,10 +63,24 @@ def sole_contacts(index, qpos: np.ndarray, contact_height_m: float) -> np.ndarra
     return out
 
 
+def lead_in_frames(contacts: np.ndarray, fps: float, lead_in_s: float) -> tuple[int, int]:
+    """(frames to skip, frames to hold) so that a stepping motion starts from rest on both feet
+    and stands ``lead_in_s`` before its first step: a start with a foot in the air is skipped up
+    to the first frame with both feet down."""
+    contacts = np.asarray(contacts, dtype=bool)
+    # the first frame with both feet down, or the first landing (where support passes between
+    # the feet within a frame)
+    starts = np.r_[np.nonzero(contacts.all(axis=1))[0][:1], np.nonzero((contacts[1:] & ~contacts[:-1]).any(axis=1))[0][:1] + 1]
+    skip = int(starts.min()) if starts.size else 0
+    lifted = np.nonzero(~contacts[skip + 1:].all(axis=1))[0]
+    first = int(lifted[0]) + 1 if lifted.size else contacts.shape[0] - skip
+    return skip, max(0, int(round(lead_in_s * fps)) - first)
+
+
 def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, progress=None) -> FeasibleResult:
     """Run the stage on ``trajectory`` (a :class:`retarget.io.RobotTrajectory`) for robot ``index``
     (a :class:`~motok_robot.robots.index.RobotIndex`)."""
-    from retarget.retime import retime
+    from retarget.retime import lead_in, retime
 
     config = config or FeasibilityConfig()
     started = time.perf_counter()
@@ -76,10 +91,23 @@ def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, pr
     record["time_warp"] = float(trajectory.retime_factor)
     fps = float(trajectory.fps)
     reference = np.asarray(trajectory.qpos, dtype=np.float64)
-    task = reference
     t0 = time.perf_counter()
     contacts = sole_contacts(index, reference, config.contact_height_m)
-    if config.zmp_shift:
+    gait = None
+    if config.gait:
+        skip, hold = lead_in_frames(contacts, fps, config.gait_lead_in_s)
+        started_at = lead_in(trajectory, skip, hold)
+        held_reference = np.asarray(started_at.qpos, dtype=np.float64)
+        gait = generate_gait(index, held_reference, fps, sole_contacts(index, held_reference, config.contact_height_m),
+                             lead_in_frames=hold, min_double_support_s=config.gait_double_support_s)
+        if gait is not None:  # a walk: it starts from rest on both feet
+            trajectory, reference, contacts = started_at, held_reference, gait.contacts
+            record["start"] = {"skipped_s": skip / fps, "lead_in_s": hold / fps}
+    task = reference
+    if gait is not None:
+        task = gait.qpos
+        record["gait"] = gait.record()
+    elif config.zmp_shift:
         shifted = shift_com(index, reference, fps, contacts, margin_m=config.zmp_margin_m, axes=config.zmp_axes)
         task = shifted.qpos
         record["zmp_shift"] = shifted.record()
@@ -88,7 +116,8 @@ def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, pr
     joint_pos, joint_vel, torque = required_torque(index, task, fps, config.contact_height_m, config.friction)
     stiffness, damping = servo_gains(servo_model(index, config.timestep_s)[0], index)
     goals = feedforward_goals(index, joint_pos, joint_vel, torque, fps, stiffness, damping, config.goal_velocity_fraction)
-    plan = build_plan(index, task, fps, sole_contacts(index, task, config.contact_height_m), config.balance) \
+    plan_contacts = gait.contacts if gait is not None else sole_contacts(index, task, config.contact_height_m)
+    plan = build_plan(index, task, fps, plan_contacts, config.balance) \
         if config.balance.enabled else None
     timing["goals"] = time.perf_counter() - t0
     if config.refine:

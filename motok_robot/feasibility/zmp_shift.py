@@ -118,7 +118,7 @@ def _com_path(com: np.ndarray, target_zmp: np.ndarray, fps: float, regularisatio
     return out
 
 
-def _leg_dofs(index) -> list:
+def leg_dofs(index) -> list:
     """Per leg: (qpos addresses, dof addresses) of the hinges from the sole body up to the base."""
     model = index.kin_model
     legs = []
@@ -135,9 +135,13 @@ def _leg_dofs(index) -> list:
     return legs
 
 
-def _solve_legs(index, qpos_t: np.ndarray, foot_pos: np.ndarray, foot_quat: np.ndarray, legs, data,
-                iterations: int = 20, damping: float = 1e-4) -> float:
-    """Re-solve the legs in place so each sole body reaches its pose; returns the position error (m)."""
+def solve_legs(index, qpos_t: np.ndarray, foot_pos: np.ndarray, foot_quat: np.ndarray, legs, data,
+                iterations: int = 20, damping: float = 1e-4, previous: np.ndarray | None = None,
+                max_step: np.ndarray | None = None) -> float:
+    """Re-solve the legs in place so each sole body reaches its pose; returns the position error (m).
+
+    With ``previous`` (qpos [nq] of the frame before) and ``max_step`` ([nq] rad per frame, for
+    the leg joints), each joint stays within ``max_step`` of its previous value: a velocity limit."""
     model = index.kin_model
     jacp = np.zeros((3, model.nv))
     jacr = np.zeros((3, model.nv))
@@ -165,6 +169,8 @@ def _solve_legs(index, qpos_t: np.ndarray, foot_pos: np.ndarray, foot_quat: np.n
             step = J.T @ np.linalg.solve(J @ J.T + damping * np.eye(6), err)
             qpos_t[qadr] += np.clip(step, -0.05, 0.05)  # small steps: stay on the reference's IK branch
             for a in qadr:
+                if previous is not None:
+                    qpos_t[a] = np.clip(qpos_t[a], previous[a] - max_step[a], previous[a] + max_step[a])
                 if a in limits:
                     qpos_t[a] = np.clip(qpos_t[a], limits[a][0], limits[a][1])
         data.qpos[:] = qpos_t
@@ -191,7 +197,7 @@ def shift_com(index, qpos: np.ndarray, fps: float, contacts: np.ndarray, margin_
         side = np.stack([-np.sin(yaw), np.cos(yaw)], axis=1)
         change = ((path - com[:, :2]) * side).sum(axis=1, keepdims=True)
         path = com[:, :2] + change * side
-    legs = _leg_dofs(index)
+    legs = leg_dofs(index)
     data = mujoco.MjData(index.kin_model)
     worst = 0.0
     current = com
@@ -205,7 +211,7 @@ def shift_com(index, qpos: np.ndarray, fps: float, contacts: np.ndarray, margin_
             qpos[t, :2] += delta[t]
             if k == 0:
                 qpos[t, leg_q] = reference[t, leg_q] + correction
-            worst = max(worst, _solve_legs(index, qpos[t], foot_pos[t], foot_quat[t], legs, data))
+            worst = max(worst, solve_legs(index, qpos[t], foot_pos[t], foot_quat[t], legs, data))
             correction = qpos[t, leg_q] - reference[t, leg_q]
         current = _kinematics(index, qpos)[0]
     after = _outside_fraction(cart_table_zmp(current, fps), hulls, tolerance_m)
