@@ -8,7 +8,10 @@ no plots or video) in up to three variants:
 * ``A`` (baseline): the retargeted robot.npz validated as it is (today's path);
 * ``B`` (feasible): ``make_feasible(..., FeasibilityConfig())`` + ``write_feasible``, then the
   stage's robot.npz validated (it replays the stage's goals and plan, judged against the reference);
-* ``C`` (feasible, slowed): the same with ``FeasibilityConfig(retime=1.5)``.
+* ``C`` (feasible, slowed): the same with ``FeasibilityConfig(retime=1.5)``;
+* ``D`` (feasible, own steps): the same with ``GaitConfig(enabled=True)``: a clip that travels is
+  walked with the robot's own steps along its path (docs/feasibility.md, "Walking with the
+  robot's own steps").
 
 Clip set (from ``--datasets``, default ``../shared/datasets``; extracted into ``--work``):
 
@@ -55,7 +58,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import REPO_ROOT, RESULTS_DIR, machine_description, markdown_table, write_json  # noqa: E402
 
-VARIANTS = {"A": "baseline", "B": "feasible", "C": "feasible_retime1.5"}
+VARIANTS = {"A": "baseline", "B": "feasible", "C": "feasible_retime1.5", "D": "feasible_own_steps"}
 METRICS = ("fell", "fall_time_s", "base_drift_m", "tracking_rmse_rad", "pose_error_mean_m", "heading_error_max_rad",
            "zmp_outside_ratio", "max_torque_ratio")
 #: Bandai contents besides the walks, first take of style "normal" (the first style present otherwise)
@@ -204,17 +207,18 @@ def retarget_cached(clip: dict, robot_name: str, work: Path) -> tuple[Path, dict
 
 
 def run_variant(variant: str, npz: Path, index, out: Path) -> dict:
-    """Feasibility stage (B, C) and validation of one variant; fields of the row."""
+    """Feasibility stage (B, C, D) and validation of one variant; fields of the row."""
     from motok_robot.sim.validate import validate_file
 
     row: dict = {"stage_s": {}}
-    if variant in ("B", "C"):
-        from motok_robot.feasibility.config import FeasibilityConfig
+    if variant in ("B", "C", "D"):
+        from motok_robot.feasibility.config import FeasibilityConfig, GaitConfig
         from motok_robot.feasibility.stage import make_feasible, write_feasible
         from retarget.io import read_robot_npz
 
         t0 = time.perf_counter()
-        config = FeasibilityConfig(retime=1.5) if variant == "C" else FeasibilityConfig()
+        config = (FeasibilityConfig(retime=1.5) if variant == "C" else
+                  FeasibilityConfig(gait=GaitConfig(enabled=True)) if variant == "D" else FeasibilityConfig())
         result = make_feasible(read_robot_npz(npz), index, config)
         npz = write_feasible(result, out / "feasible", index.name)
         row["stage_s"]["feasible"] = time.perf_counter() - t0
@@ -224,6 +228,8 @@ def run_variant(variant: str, npz: Path, index, out: Path) -> dict:
                         "com_shift_m_max": shift.get("com_shift_m_max"),
                         "zmp_outside_before": shift.get("zmp_outside_before"),
                         "zmp_outside_after": shift.get("zmp_outside_after"),
+                        "own_steps": {k: v for k, v in result.record["gait"].items() if k != "footholds"}
+                        if "gait" in result.record else None,
                         "timing_s": result.record["timing_s"]}
     t0 = time.perf_counter()
     report = validate_file(npz, index, out_dir=out / "validation", plots=False, render=False).report

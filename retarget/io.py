@@ -26,6 +26,9 @@ Written by the feasibility stage (``motok_robot.feasibility``; absent in retarge
     reference_qpos  float64 [T, nq]   the kinematic trajectory the robot was asked to perform;
                                       ``qpos`` is then what it executed in physics
     initial_qvel    float64 [nv]      the velocity the executed rollout started from
+    task_qpos       float64 [T, nq]   what the stage commanded the servos to follow: the
+                                      reference with the stage's changes (its CoM path, or its
+                                      own steps for a walk); validation's ``tracking`` uses it
     feasibility     str (JSON)        what the stage changed (docs/feasibility.md)
 """
 
@@ -161,6 +164,8 @@ def _feasibility_fields(result) -> dict:
         out["reference_qpos"] = np.asarray(result.reference_qpos, dtype=np.float64)
     if getattr(result, "initial_qvel", None) is not None:
         out["initial_qvel"] = np.asarray(result.initial_qvel, dtype=np.float64)
+    if getattr(result, "task_qpos", None) is not None:
+        out["task_qpos"] = np.asarray(result.task_qpos, dtype=np.float64)
     if getattr(result, "feasibility", None) is not None:
         out["feasibility"] = np.array(json.dumps(result.feasibility))
     return out
@@ -183,6 +188,7 @@ class RobotTrajectory:
     collision_pairs: list[str] = field(default_factory=list)  # geom pairs retargeting kept apart
     reference_qpos: np.ndarray | None = None  # [T, nq] the kinematic trajectory (feasibility output only)
     initial_qvel: np.ndarray | None = None    # [nv] start velocity of the executed rollout
+    task_qpos: np.ndarray | None = None       # [T, nq] what the servos were commanded to follow (feasibility output only)
     feasibility: dict | None = None           # what the feasibility stage changed
 
 
@@ -215,6 +221,7 @@ def read_robot_npz(path: str | Path) -> RobotTrajectory:
                 collision_pairs=[str(n) for n in d["collision_pairs"]] if "collision_pairs" in d.files else [],
                 reference_qpos=np.asarray(d["reference_qpos"], dtype=np.float64) if "reference_qpos" in d.files else None,
                 initial_qvel=np.asarray(d["initial_qvel"], dtype=np.float64) if "initial_qvel" in d.files else None,
+                task_qpos=np.asarray(d["task_qpos"], dtype=np.float64) if "task_qpos" in d.files else None,
                 feasibility=json.loads(str(d["feasibility"])) if "feasibility" in d.files else None,
             )
     except InputError:
@@ -224,6 +231,8 @@ def read_robot_npz(path: str | Path) -> RobotTrajectory:
     T = out.qpos.shape[0]
     if out.qpos.ndim != 2 or out.contacts.shape != (T, 2) or out.keypoint_error.shape[0] != T:
         raise InputError(f"{path}: inconsistent shapes qpos {out.qpos.shape}, contacts {out.contacts.shape}, keypoint_error {out.keypoint_error.shape}")
-    if out.reference_qpos is not None and out.reference_qpos.shape != out.qpos.shape:
-        raise InputError(f"{path}: field 'reference_qpos' has shape {out.reference_qpos.shape}, 'qpos' {out.qpos.shape}")
+    for name in ("reference_qpos", "task_qpos"):
+        value = getattr(out, name)
+        if value is not None and value.shape != out.qpos.shape:
+            raise InputError(f"{path}: field '{name}' has shape {value.shape}, 'qpos' {out.qpos.shape}")
     return out

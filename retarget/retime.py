@@ -55,16 +55,15 @@ def retime(trajectory: RobotTrajectory, factor: float) -> RobotTrajectory:
         retime_factor=float(trajectory.retime_factor) * float(factor))
 
 
-def lead_in(trajectory: RobotTrajectory, skip: int, hold: int) -> RobotTrajectory:
-    """``trajectory`` without its first ``skip`` frames, its new first frame then held for
-    ``hold`` extra frames: a start from rest for a motion captured mid-stride (a robot cannot
-    start from rest on one foot, nor start walking without first shifting its weight)."""
+def hold_ends(trajectory: RobotTrajectory, before: int, after: int) -> RobotTrajectory:
+    """``trajectory`` with its first frame held for ``before`` extra frames and its last for
+    ``after``: time for a robot to shift its weight before its first step, and to bring its feet
+    together after the last."""
     T = trajectory.qpos.shape[0]
-    skip = int(np.clip(skip, 0, T - 1))
-    hold = max(0, int(hold))
-    if skip == 0 and hold == 0:
+    before, after = max(0, int(before)), max(0, int(after))
+    if before == 0 and after == 0:
         return replace(trajectory)
-    index = np.r_[np.full(hold, skip, dtype=int), np.arange(skip, T)]
+    index = np.r_[np.zeros(before, dtype=int), np.arange(T), np.full(after, T - 1, dtype=int)]
     return replace(
         trajectory, qpos=np.asarray(trajectory.qpos)[index], contacts=np.asarray(trajectory.contacts)[index],
         keypoint_error=np.asarray(trajectory.keypoint_error)[index], source=np.asarray(trajectory.source)[index])

@@ -101,3 +101,33 @@ def test_pipeline_slows_a_motion_that_is_too_fast(fast_wave, tmp_path):
     # the streamed goals are the validated ones: the playback limiter never had to clamp them
     assert json.loads(result.files["playback_stats"].read_text())["limited"] == 0
     assert "slower" in result.files["summary"].read_text()
+
+
+def test_hold_ends_stands_before_and_after_and_keeps_every_per_frame_field():
+    from retarget.retime import hold_ends
+
+    trajectory = _trajectory(T=10)
+    held = hold_ends(trajectory, 3, 2)
+    assert held.qpos.shape[0] == 15
+    assert np.array_equal(held.qpos[:4], np.repeat(trajectory.qpos[:1], 4, axis=0))
+    assert np.array_equal(held.qpos[3:13], trajectory.qpos)
+    assert np.array_equal(held.qpos[-3:], np.repeat(trajectory.qpos[-1:], 3, axis=0))
+    for name in ("contacts", "keypoint_error", "source"):
+        assert getattr(held, name).shape[0] == 15
+    assert held.retime_factor == trajectory.retime_factor  # standing still is not a slow-down
+    assert hold_ends(trajectory, 0, 0).qpos.shape == trajectory.qpos.shape
+
+
+def test_task_qpos_round_trips_through_robot_npz_and_a_wrong_shape_is_named(tmp_path):
+    import dataclasses
+
+    trajectory = _trajectory()
+    task = trajectory.qpos + 0.1
+    path = write_robot_npz(tmp_path / "robot.npz", dataclasses.replace(trajectory, task_qpos=task))
+    assert np.array_equal(read_robot_npz(path).task_qpos, task)
+    assert read_robot_npz(write_robot_npz(tmp_path / "plain.npz", trajectory)).task_qpos is None
+    data = dict(np.load(path))
+    data["task_qpos"] = task[:-1]
+    np.savez(tmp_path / "bad.npz", **data)
+    with pytest.raises(InputError, match="task_qpos"):
+        read_robot_npz(tmp_path / "bad.npz")

@@ -31,6 +31,9 @@ def register(commands, groups) -> None:
     parser.add_argument("--no-zmp-shift", action="store_true", help="keep the retargeted CoM path")
     parser.add_argument("--zmp-axes", choices=("lateral", "both"), default="lateral",
                         help="directions the CoM may move (default lateral)")
+    parser.add_argument("--own-steps", action="store_true",
+                        help="walk a motion that travels with the robot's own steps along its path (footsteps, CoM "
+                             "and swing planned for the robot; played slower where it cannot step as fast)")
     parser.add_argument("--no-balance", action="store_true", help="no balance controller (open-loop goals)")
     parser.add_argument("--refine", action="store_true", help="refine the goals by predictive sampling (slower)")
     parser.add_argument("--samples", type=int, default=None, help="refinement: rollouts per planning step (default 16)")
@@ -44,7 +47,7 @@ def run_feasible(args) -> int:
     from pathlib import Path
 
     from motok_robot.errors import InputError
-    from motok_robot.feasibility.config import BalanceConfig, FeasibilityConfig, RefineConfig
+    from motok_robot.feasibility.config import BalanceConfig, FeasibilityConfig, GaitConfig, RefineConfig
     from motok_robot.sim.cli import _robot_for
 
     refine = RefineConfig()
@@ -54,7 +57,7 @@ def run_feasible(args) -> int:
         refine = dataclasses.replace(refine, horizon_s=args.horizon)
     config = FeasibilityConfig(retime=args.retime, zmp_shift=not args.no_zmp_shift, zmp_axes=args.zmp_axes,
                                refine=args.refine, balance=BalanceConfig(enabled=not args.no_balance),
-                               refine_config=refine)
+                               refine_config=refine, gait=GaitConfig(enabled=args.own_steps))
     path = Path(args.input)
     if not path.is_file():
         raise InputError(f"{path}: file not found")
@@ -76,9 +79,14 @@ def run_feasible(args) -> int:
     out = write_feasible(result, args.out, index.name)
     rec = result.record
     shift = rec.get("zmp_shift")
+    walk = rec.get("gait")
     print(f"{index.name}: {result.trajectory.qpos.shape[0]} frames, time warp {rec['time_warp']:.2f}x"
           + (f", CoM moved up to {shift['com_shift_m_max'] * 100:.1f} cm (cart-table ZMP outside "
-             f"{shift['zmp_outside_before']:.0%} -> {shift['zmp_outside_after']:.0%} of support frames)" if shift else ""))
+             f"{shift['zmp_outside_before']:.0%} -> {shift['zmp_outside_after']:.0%} of support frames)" if shift else "")
+          + (f", walked with {walk['steps']} steps of its own (lead-in {walk['lead_in_s']:.1f} s, lead-out "
+             f"{walk['lead_out_s']:.1f} s)" if walk else ""))
+    if args.own_steps and not walk:
+        print("  --own-steps: the motion does not travel (or lifts a foot higher than a step): its legs are kept")
     print(f"  executed from rest{' with the balance controller' if result.plan is not None else ' open loop'}: "
           f"{'FELL at %.2f s' % rec['executed']['fall_time_s'] if result.fell else 'stayed up'}, root "
           f"{rec['executed']['base_drift_max_m']:.3f} m from the reference at most{' before that' if result.fell else ''}; "

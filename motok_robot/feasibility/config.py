@@ -138,19 +138,56 @@ class RefineConfig:
 
 
 @dataclass(frozen=True)
+class GaitConfig:
+    """Walking with the robot's own steps (:mod:`.footsteps`, :mod:`.gait`)."""
+
+    #: replace the legs of a motion that travels by a walk planned for the robot along its path
+    #: (False: the retargeted legs are tracked, with the ZMP shift)
+    enabled: bool = False
+    #: one step every this many seconds, ``double_support`` of it on both feet
+    step_period_s: float = 0.5
+    double_support: float = 0.2
+    #: the longest step (how far a foot lands ahead of the other), per leg length; 0.27 on
+    #: op3_like = 6 cm, half a foot length: the synthetic walk that stays up at 0.5 s a step
+    advance_per_leg: float = 0.27
+    #: the largest turn of a foot per step (rad)
+    turn_per_step_rad: float = 0.3
+    #: how high the swing foot lifts at mid-swing, per leg length (0.15 on op3_like = 3.3 cm)
+    clearance_per_leg: float = 0.15
+    #: the swing foot rises and lands vertically over this share of the swing at each end
+    vertical_share: float = 0.15
+    #: standing on both feet before the first step and after the reference ends (s): a robot
+    #: starts from rest, and the last steps bring the feet together
+    lead_in_s: float = 0.6
+    lead_out_s: float = 1.0
+    #: where the reference moves faster than the robot can step, the motion is played slower,
+    #: by at most this factor
+    max_time_warp: float = 3.0
+    #: a motion is walked when both feet travel farther than this per leg length and neither
+    #: rises above ``max_lift_per_leg`` (a wave on the spot, a kick or a jump keeps its
+    #: retargeted legs)
+    min_travel_per_leg: float = 0.5
+    max_lift_per_leg: float = 0.3
+
+    def __post_init__(self):
+        for name, low, high in (("step_period_s", 0.2, 2.0), ("double_support", 0.05, 0.8), ("advance_per_leg", 0.02, 1.0),
+                                ("turn_per_step_rad", 0.0, 1.0), ("clearance_per_leg", 0.0, 0.5), ("vertical_share", 0.0, 0.45), ("lead_in_s", 0.0, 5.0),
+                                ("lead_out_s", 0.0, 5.0), ("max_time_warp", 1.0, 4.0), ("min_travel_per_leg", 0.0, 10.0),
+                                ("max_lift_per_leg", 0.0, 2.0)):
+            value = float(getattr(self, name))
+            if not low <= value <= high:
+                raise InputError(f"gait {name} = {value}: must lie in [{low}, {high}]")
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
 class FeasibilityConfig:
     """The whole stage (:mod:`motok_robot.feasibility.stage`)."""
 
     #: play the motion this many times slower (1 = human timing); recorded as the time warp
     retime: float = 1.0
-    #: regenerate stepping motion (:mod:`.gait`): footholds from the reference, double support
-    #: of at least ``gait_double_support_s``, a CoM path planned from the footholds' ZMP; motion
-    #: that does not step keeps the reference (and the ZMP shift below)
-    gait: bool = False
-    gait_double_support_s: float = 0.1
-    #: a walk whose first step comes sooner than this after its start (or that starts with a
-    #: foot in the air) gets a lead-in of standing on both feet first (s)
-    gait_lead_in_s: float = 0.6
     #: move the CoM so the cart-table ZMP stays on the planned feet (:mod:`.zmp_shift`)
     zmp_shift: bool = True
     #: how far inside the support polygon the shifted ZMP is kept (m)
@@ -168,6 +205,7 @@ class FeasibilityConfig:
     friction: float = 0.8
     balance: BalanceConfig = field(default_factory=BalanceConfig)
     refine_config: RefineConfig = field(default_factory=RefineConfig)
+    gait: GaitConfig = field(default_factory=GaitConfig)
 
     def __post_init__(self):
         if not 1.0 <= float(self.retime) <= 4.0:

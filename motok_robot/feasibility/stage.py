@@ -3,7 +3,10 @@
 Steps (each recorded in the output's ``feasibility`` field and ``feasibility.json``):
 
 1. optional uniform slow-down (``retime``; the time warp the fidelity checks see);
-2. a CoM path whose cart-table ZMP stays on the planned feet (:mod:`.zmp_shift`);
+2. the task: with ``gait.enabled`` a motion that travels is walked with the robot's own steps
+   along its path (:func:`walk_task`: :mod:`.footsteps`, :mod:`.gait`; slower where the robot
+   cannot step as fast, with standing added before and after); otherwise a CoM path whose
+   cart-table ZMP stays on the planned feet (:mod:`.zmp_shift`);
 3. servo goals with inverse-dynamics feedforward (:mod:`.feedforward`) of that task;
 4. the balance controller's plan (:mod:`.balance`), which validation and playback run;
 5. optional predictive-sampling refinement of the goals over physics rollouts (:mod:`.refine`);
@@ -11,8 +14,9 @@ Steps (each recorded in the output's ``feasibility`` field and ``feasibility.jso
 
 Output ``robot.npz`` keeps retargeting's fields, with ``qpos`` = the executed trajectory,
 ``reference_qpos`` = the kinematic trajectory it was asked to do (after the slow-down), which
-validation judges it against (falls, tracking, drift, fidelity), and ``initial_qvel`` = zeros
-(playback starts the robot at rest).  ``servo_goals.npz`` beside it (mode ``feasibility``)
+validation judges it against (falls, drift, fidelity), ``task_qpos`` = what the servos were
+commanded to follow (validation's ``tracking``), and ``initial_qvel`` = zeros (playback starts
+the robot at rest).  ``servo_goals.npz`` beside it (mode ``feasibility``)
 holds the goals and the plan; validation of that ``robot.npz`` replays exactly them.
 """
 
@@ -31,6 +35,7 @@ import numpy as np
 from motok_robot.feasibility.balance import BalancePlan, build_plan
 from motok_robot.feasibility.config import FeasibilityConfig
 from motok_robot.feasibility.dynamics import required_torque
+from motok_robot.feasibility.footsteps import RobotFeet, base_path, plan_steps, stance_offsets, time_warp_for
 from motok_robot.feasibility.gait import generate_gait
 from motok_robot.feasibility.feedforward import GOALS_FILE, feedforward_goals, save_servo_goals, servo_gains
 from motok_robot.feasibility.physics import execute, servo_model
@@ -63,24 +68,73 @@ def sole_contacts(index, qpos: np.ndarray, contact_height_m: float) -> np.ndarra
     return out
 
 
-def lead_in_frames(contacts: np.ndarray, fps: float, lead_in_s: float) -> tuple[int, int]:
-    """(frames to skip, frames to hold) so that a stepping motion starts from rest on both feet
-    and stands ``lead_in_s`` before its first step: a start with a foot in the air is skipped up
-    to the first frame with both feet down."""
+def _soles(index, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Horizontal sole body positions [T, 2, 2] and lowest sole corner heights [T, 2] of ``qpos``."""
+    data = mujoco.MjData(index.kin_model)
+    xy, low = np.zeros((qpos.shape[0], 2, 2)), np.zeros((qpos.shape[0], 2))
+    for t in range(qpos.shape[0]):
+        data.qpos[:] = qpos[t]
+        mujoco.mj_kinematics(index.kin_model, data)
+        xy[t] = data.xpos[index.sole_body][:, :2]
+        low[t] = data.site_xpos[index.corner_sites][:, :, 2].min(axis=1)
+    return xy, low
+
+
+def walks(index, qpos: np.ndarray, feet, config) -> bool:
+    """Whether ``qpos`` [T, nq] is a walk to re-plan: both soles travel farther than
+    ``config.min_travel_per_leg`` leg lengths over the clip, and no sole corner rises above
+    ``config.max_lift_per_leg`` leg lengths (a kick or a jump keeps its retargeted legs)."""
+    xy, low = _soles(index, qpos)
+    travel = np.linalg.norm(np.diff(xy, axis=0), axis=2).sum(axis=0)
+    return bool(travel.min() > config.min_travel_per_leg * feet.leg_length
+                and low.max() < config.max_lift_per_leg * feet.leg_length)
+
+
+def first_lifted_foot(contacts: np.ndarray) -> int:
+    """The foot (0 left, 1 right) that leaves the floor first in ``contacts`` [T, 2] (right if neither)."""
     contacts = np.asarray(contacts, dtype=bool)
-    # the first frame with both feet down, or the first landing (where support passes between
-    # the feet within a frame)
-    starts = np.r_[np.nonzero(contacts.all(axis=1))[0][:1], np.nonzero((contacts[1:] & ~contacts[:-1]).any(axis=1))[0][:1] + 1]
-    skip = int(starts.min()) if starts.size else 0
-    lifted = np.nonzero(~contacts[skip + 1:].all(axis=1))[0]
-    first = int(lifted[0]) + 1 if lifted.size else contacts.shape[0] - skip
-    return skip, max(0, int(round(lead_in_s * fps)) - first)
+    for t in range(1, contacts.shape[0]):
+        lifted = contacts[t - 1] & ~contacts[t]
+        if lifted.any():
+            return int(np.nonzero(lifted)[0][0])
+    return 1
+
+
+def walk_task(trajectory, index, config, record: dict):
+    """(trajectory, task qpos, planned contacts) of the robot's own walk along ``trajectory``'s
+    path (:mod:`.footsteps`, :mod:`.gait`), or None when the motion does not travel."""
+    from retarget.retime import hold_ends, retime
+
+    gait = config.gait
+    fps = float(trajectory.fps)
+    feet = RobotFeet(index)
+    qpos = np.asarray(trajectory.qpos, dtype=np.float64)
+    if not walks(index, qpos, feet, gait):
+        return None
+    warp = time_warp_for(qpos, fps, feet, gait.step_period_s, gait.advance_per_leg, gait.turn_per_step_rad,
+                         gait.max_time_warp)
+    contacts = sole_contacts(index, qpos, config.contact_height_m)
+    if warp > 1.0:
+        trajectory = retime(trajectory, warp)
+    before = int(round(gait.lead_in_s * fps))
+    trajectory = hold_ends(trajectory, before, int(round(gait.lead_out_s * fps)))
+    reference = np.asarray(trajectory.qpos, dtype=np.float64)
+    offsets = stance_offsets(feet, qpos, _soles(index, qpos)[0], contacts)
+    schedule = plan_steps(index, reference, fps, first_step_frame=before, step_period_s=gait.step_period_s,
+                          double_support=gait.double_support, advance_per_leg=gait.advance_per_leg,
+                          turn_per_step_rad=gait.turn_per_step_rad, clearance_per_leg=gait.clearance_per_leg,
+                          first_foot=first_lifted_foot(contacts), feet=feet, offsets=offsets,
+                          lift_share=gait.vertical_share)
+    walk = generate_gait(index, reference, fps, schedule, base_yaw=base_path(reference, fps, gait.step_period_s)[1])
+    record["gait"] = {"time_warp": warp, "lead_in_s": before / fps, "lead_out_s": round(gait.lead_out_s * fps) / fps,
+                      **schedule.record(), **walk.record()}
+    return trajectory, walk.qpos, walk.contacts
 
 
 def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, progress=None) -> FeasibleResult:
     """Run the stage on ``trajectory`` (a :class:`retarget.io.RobotTrajectory`) for robot ``index``
     (a :class:`~motok_robot.robots.index.RobotIndex`)."""
-    from retarget.retime import lead_in, retime
+    from retarget.retime import retime
 
     config = config or FeasibilityConfig()
     started = time.perf_counter()
@@ -93,30 +147,23 @@ def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, pr
     reference = np.asarray(trajectory.qpos, dtype=np.float64)
     t0 = time.perf_counter()
     contacts = sole_contacts(index, reference, config.contact_height_m)
-    gait = None
-    if config.gait:
-        skip, hold = lead_in_frames(contacts, fps, config.gait_lead_in_s)
-        started_at = lead_in(trajectory, skip, hold)
-        held_reference = np.asarray(started_at.qpos, dtype=np.float64)
-        gait = generate_gait(index, held_reference, fps, sole_contacts(index, held_reference, config.contact_height_m),
-                             lead_in_frames=hold, min_double_support_s=config.gait_double_support_s)
-        if gait is not None:  # a walk: it starts from rest on both feet
-            trajectory, reference, contacts = started_at, held_reference, gait.contacts
-            record["start"] = {"skipped_s": skip / fps, "lead_in_s": hold / fps}
-    task = reference
-    if gait is not None:
-        task = gait.qpos
-        record["gait"] = gait.record()
+    walk = walk_task(trajectory, index, config, record) if config.gait.enabled else None
+    task, plan_contacts = reference, None
+    if walk is not None:  # the robot's own walk along the path (it may be slower and longer)
+        trajectory, task, plan_contacts = walk
+        reference = np.asarray(trajectory.qpos, dtype=np.float64)
+        record["time_warp"] = float(trajectory.retime_factor)
     elif config.zmp_shift:
         shifted = shift_com(index, reference, fps, contacts, margin_m=config.zmp_margin_m, axes=config.zmp_axes)
         task = shifted.qpos
         record["zmp_shift"] = shifted.record()
-    timing["zmp_shift"] = time.perf_counter() - t0
+    timing["task"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     joint_pos, joint_vel, torque = required_torque(index, task, fps, config.contact_height_m, config.friction)
     stiffness, damping = servo_gains(servo_model(index, config.timestep_s)[0], index)
     goals = feedforward_goals(index, joint_pos, joint_vel, torque, fps, stiffness, damping, config.goal_velocity_fraction)
-    plan_contacts = gait.contacts if gait is not None else sole_contacts(index, task, config.contact_height_m)
+    if plan_contacts is None:
+        plan_contacts = sole_contacts(index, task, config.contact_height_m)
     plan = build_plan(index, task, fps, plan_contacts, config.balance) \
         if config.balance.enabled else None
     timing["goals"] = time.perf_counter() - t0
@@ -137,7 +184,7 @@ def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, pr
                           "base_drift_max_m": float(drift.max()) if drift.size else 0.0}
     record["balance"] = config.balance.to_dict() if plan is not None else None
     record["timing_s"] = {**timing, "total": time.perf_counter() - started}
-    out = dataclasses.replace(trajectory, qpos=executed, reference_qpos=reference,
+    out = dataclasses.replace(trajectory, qpos=executed, reference_qpos=reference, task_qpos=task,
                               initial_qvel=np.zeros(index.model.nv), feasibility=record)
     return FeasibleResult(trajectory=out, goals=goals, plan=plan, record=record)
 

@@ -64,6 +64,9 @@ def register(commands, groups) -> None:
                         "retarget (docs/feasibility.md); the balance repair and slow-down below are then not tried")
     parser.add_argument("--feasible-retime", type=float, default=1.0, metavar="F",
                         help="with --feasible: play the motion F times slower, 1-4 (default 1)")
+    parser.add_argument("--feasible-own-steps", action="store_true",
+                        help="with --feasible: a motion that travels is walked with the robot's own steps along "
+                             "its path, played slower where the robot cannot step as fast (docs/feasibility.md)")
     parser.add_argument("--max-retime", type=float, default=PipelineConfig.max_retime, metavar="S",
                         help="when the motion is too fast for the servos (the torque, joint_velocity or "
                         "joint_acceleration check fails), play it up to S times slower until those checks pass "
@@ -222,13 +225,17 @@ def constraint_arguments(args: argparse.Namespace, seconds: float | None):
 
 
 def feasibility_config(args: argparse.Namespace):
-    """The feasibility stage's settings from ``--feasible`` / ``--feasible-retime`` (None: off)."""
+    """The feasibility stage's settings from ``--feasible`` / ``--feasible-retime`` /
+    ``--feasible-own-steps`` (None: off)."""
     if not args.feasible:
-        if args.feasible_retime != 1.0:
-            from motok_robot.errors import InputError
+        for flag, used in (("--feasible-retime", args.feasible_retime != 1.0),
+                           ("--feasible-own-steps", getattr(args, "feasible_own_steps", False))):
+            if used:
+                from motok_robot.errors import InputError
 
-            raise InputError("--feasible-retime needs --feasible")
+                raise InputError(f"{flag} needs --feasible")
         return None
-    from motok_robot.feasibility.config import FeasibilityConfig
+    from motok_robot.feasibility.config import FeasibilityConfig, GaitConfig
 
-    return FeasibilityConfig(retime=args.feasible_retime)
+    return FeasibilityConfig(retime=args.feasible_retime,
+                             gait=GaitConfig(enabled=bool(getattr(args, "feasible_own_steps", False))))

@@ -200,6 +200,8 @@ def feasible(config, entry: dict, files: dict, tmp: Path, notes: list) -> dict:
     shift = rec.get("zmp_shift")
     notes.append(f"feasibility: executed closed loop from rest{', time warp %.2fx' % rec['time_warp'] if rec['time_warp'] != 1 else ''}"
                  + (f", CoM moved up to {shift['com_shift_m_max'] * 100:.1f} cm" if shift else "")
+                 + (f", walked with {rec['gait']['steps']} steps of its own (standing {rec['gait']['lead_in_s']:.1f} s "
+                    f"before and {rec['gait']['lead_out_s']:.1f} s after)" if "gait" in rec else "")
                  + (f", goals refined ({rec['refine']['rollouts']} rollouts)" if "refine" in rec else "")
                  + ("; the robot FELL" if result.fell else ""))
     return load_servo_goals(tmp / "servo_goals.npz")

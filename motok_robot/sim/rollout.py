@@ -115,7 +115,8 @@ def _up_axis(quat: np.ndarray) -> np.ndarray:
 def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: ValidationConfig,
              goals: np.ndarray | None = None, plan: BalancePlan | None = None,
              initial_qvel: np.ndarray | None = None, judge_qpos: np.ndarray | None = None,
-             model: mujoco.MjModel | None = None, pushes: Sequence[Push] = ()) -> RolloutResult:
+             model: mujoco.MjModel | None = None, pushes: Sequence[Push] = (),
+             track_qpos: np.ndarray | None = None) -> RolloutResult:
     """Roll the robot out in physics tracking ``qpos`` [T, nq] (frames at ``fps``).
 
     ``goals`` [T, nj] (rad, robot joint order) are the servo goals when they differ from the
@@ -126,7 +127,8 @@ def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: Validation
 
     The robot starts at ``qpos[0]`` with ``initial_qvel`` (default: the finite-difference velocity
     of ``qpos``).  Falls, tracking and drift are judged against ``judge_qpos`` when given (the
-    kinematic reference of an executed trajectory), else against ``qpos``.  ``model`` replaces
+    kinematic reference of an executed trajectory), else against ``qpos``; tracking is judged
+    against ``track_qpos`` when given (what the servos were commanded to follow).  ``model`` replaces
     the servo model (default ``servo_model(index, config)``; a changed copy of it tests
     robustness) and ``pushes`` are applied during the rollout."""
     import time as _time
@@ -211,7 +213,8 @@ def simulate(index: RobotIndex, qpos: np.ndarray, fps: float, config: Validation
     sim_qpos = np.where(frame_step[:, None] < 0, qpos[0][None], all_qpos[np.maximum(frame_step, 0)])
     valid = np.ones(T, dtype=bool) if not fell else ref_time < fall_time
     valid[0] = True
-    err = sim_qpos[:, index.qpos_adr] - judge[:, index.qpos_adr]
+    track = judge if track_qpos is None else np.asarray(track_qpos, dtype=np.float64)
+    err = sim_qpos[:, index.qpos_adr] - track[:, index.qpos_adr]
     rmse_joint = np.sqrt((err[valid] ** 2).mean(axis=0))
     rmse = float(np.sqrt((err[valid] ** 2).mean()))
     drift = np.linalg.norm(sim_qpos[:, :2] - judge[:, :2], axis=1)

@@ -31,6 +31,8 @@ class RobotTrajectory:
     reference_qpos: float64 [T, nq] the kinematic trajectory the robot was asked to perform, when
                  ``qpos`` is what it executed in physics (the feasibility stage's output), or None.
     initial_qvel: float64 [nv] the start velocity of that execution, or None.
+    task_qpos:   float64 [T, nq] what the servos were commanded to follow in that execution (the
+                 reference with the feasibility stage's changes), or None.
     """
 
     qpos: np.ndarray
@@ -41,6 +43,7 @@ class RobotTrajectory:
     source: str = ""
     reference_qpos: np.ndarray | None = None
     initial_qvel: np.ndarray | None = None
+    task_qpos: np.ndarray | None = None
 
     @property
     def num_frames(self) -> int:
@@ -85,20 +88,23 @@ def load_robot_npz(path: str | Path, robot=None) -> RobotTrajectory:
         contacts = np.asarray(fields["contacts"]).astype(bool)
         if contacts.shape != (qpos.shape[0], 2):
             raise InputError(f"{path}: field 'contacts' has shape {contacts.shape}, expected ({qpos.shape[0]}, 2)")
-    reference = initial_qvel = None
-    if "reference_qpos" in fields:
-        reference = np.asarray(fields["reference_qpos"])
-        if reference.shape != qpos.shape or reference.dtype.kind not in "fi" or not np.isfinite(reference).all():
-            raise InputError(f"{path}: field 'reference_qpos' must be a finite number array of the shape of 'qpos' "
-                             f"{qpos.shape}, got {reference.dtype} {reference.shape}")
-        reference = reference.astype(np.float64)
+    initial_qvel = None
+    like_qpos = {}
+    for name in ("reference_qpos", "task_qpos"):
+        if name in fields:
+            value = np.asarray(fields[name])
+            if value.shape != qpos.shape or value.dtype.kind not in "fi" or not np.isfinite(value).all():
+                raise InputError(f"{path}: field '{name}' must be a finite number array of the shape of 'qpos' "
+                                 f"{qpos.shape}, got {value.dtype} {value.shape}")
+            like_qpos[name] = value.astype(np.float64)
     if "initial_qvel" in fields:
         initial_qvel = np.asarray(fields["initial_qvel"])
         if initial_qvel.ndim != 1 or initial_qvel.dtype.kind not in "fi" or not np.isfinite(initial_qvel).all():
             raise InputError(f"{path}: field 'initial_qvel' must be a finite number vector [nv], got {initial_qvel.dtype} {initial_qvel.shape}")
         initial_qvel = initial_qvel.astype(np.float64)
     trajectory = RobotTrajectory(qpos=qpos, fps=fps, joint_names=names, robot=robot_name,
-                                 contacts=contacts, source=str(path), reference_qpos=reference, initial_qvel=initial_qvel)
+                                 contacts=contacts, source=str(path), reference_qpos=like_qpos.get("reference_qpos"),
+                                 initial_qvel=initial_qvel, task_qpos=like_qpos.get("task_qpos"))
     if robot is not None:
         check_matches_robot(trajectory, robot, where=str(path))
     return trajectory

@@ -71,7 +71,8 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
     :func:`~motok_robot.feasibility.feedforward.load_servo_goals` returns) replaces both: the
     rollout plays those goals with that plan, as the feasibility stage made them.  A trajectory
     with ``reference_qpos`` (the feasibility stage's executed trajectory) is judged against that
-    reference: falls, tracking, drift and fidelity.
+    reference: falls, drift and fidelity; ``tracking`` against its ``task_qpos`` when present
+    (what the servos were commanded to follow), else against the reference too.
 
     ``physics_model`` and ``pushes`` change the physics only, for robustness tests (see
     :func:`~motok_robot.sim.rollout.simulate`): the goals and the plan stay those of the nominal robot.
@@ -103,7 +104,8 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
                 plan = build_plan(index, trajectory.qpos, trajectory.fps, kin.contact, balance)
         judge = trajectory.reference_qpos if trajectory.reference_qpos is not None else trajectory.qpos
         roll = simulate(index, trajectory.qpos, trajectory.fps, config, goals=goals, plan=plan,
-                        initial_qvel=trajectory.initial_qvel, judge_qpos=judge, model=physics_model, pushes=pushes)
+                        initial_qvel=trajectory.initial_qvel, judge_qpos=judge, model=physics_model, pushes=pushes,
+                        track_qpos=trajectory.task_qpos)
         fidelity = fidelity_measures(index, roll.qpos, judge, roll.valid_frames)
         timing["physics"] = time.perf_counter() - start
     checks, metrics, per_foot, per_joint = build_checks(index, kin, roll, config, trajectory.contacts, fidelity)

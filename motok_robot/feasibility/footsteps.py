@@ -1,0 +1,239 @@
+"""Footsteps planned for the robot along the reference's path, instead of the human's own steps.
+
+A human walk retargeted to a 0.5 m robot keeps the human's stride: on op3_like a Bandai walk
+steps 15-18 cm per step, 1.4 foot lengths, with support passing between the feet within one
+20 fps frame.  The robot cannot execute that stride: played as retargeted it falls in half the
+clips, played slower it falls more often, and a gait on the human's footholds with a planned
+CoM falls as often (docs/experiments/2026-12-02-generated-gait.md).  A synthetic walk of half
+a foot length per step stays up at the same cadence.  So the robot walks the reference's path
+with steps of its own:
+
+* **Timing.**  The robot steps every ``step_period_s`` with ``double_support`` of each period on
+  both feet, advancing at most ``advance_per_leg`` x its leg length per step and turning at most
+  ``turn_per_step_rad``.  Where the reference moves faster than that, the whole motion is played
+  slower (the time warp, at most ``max_time_warp``, recorded in the report).
+* **Where each foot lands.**  Where the (smoothed) reference base will be half a step after the
+  landing, offset sideways by that foot's stance offset, turned with the base's heading; clamped
+  to the step limits relative to the stance foot.  Stepping continues after the reference stops
+  until both feet stand at their final place.
+* **Swing.**  Up by ``clearance_per_leg`` x the leg length (a half sine), across (min-jerk)
+  only between the first and last 15 % of the swing, so the foot leaves and meets the floor
+  vertically.
+
+:func:`plan_steps` returns the schedule (foot poses and contacts per frame, the footholds);
+:mod:`.gait` turns it into a whole-body trajectory.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from motok_robot.feasibility.geometry import heading
+
+
+@dataclass
+class Foothold:
+    foot: int         # 0 left, 1 right
+    start: int        # first frame down
+    end: int          # last frame down
+    pos: np.ndarray   # [3] sole body position
+    quat: np.ndarray  # [4] sole body orientation
+    centre: np.ndarray  # [2] sole centre (the ZMP target while this foot carries the robot)
+
+
+@dataclass
+class StepSchedule:
+    contacts: np.ndarray   # [T, 2] bool
+    foot_pos: np.ndarray   # [T, 2, 3] sole body positions
+    foot_quat: np.ndarray  # [T, 2, 4]
+    footholds: list        # [Foothold], in time order
+    steps: int             # number of swings
+
+    def record(self) -> dict:
+        return {"steps": self.steps, "double_support_fraction": float(np.mean(self.contacts.all(axis=1))),
+                "footholds": [{"foot": "left" if f.foot == 0 else "right", "start_frame": f.start, "end_frame": f.end,
+                               "x": round(float(f.pos[0]), 4), "y": round(float(f.pos[1]), 4)} for f in self.footholds]}
+
+
+class RobotFeet:
+    """The robot's feet at its nominal pose: leg length, stance offsets, flat sole orientation."""
+
+    def __init__(self, index):
+        model = index.kin_model
+        data = mujoco.MjData(model)
+        data.qpos[:] = index.nominal_qpos
+        mujoco.mj_kinematics(model, data)
+        base = index.nominal_qpos[:3]
+        self.yaw0 = float(heading(index.nominal_qpos[None])[0])
+        c, s = np.cos(self.yaw0), np.sin(self.yaw0)
+        rel = data.xpos[index.sole_body][:, :2] - base[:2]
+        self.offset = np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]], axis=1)  # [2, 2]
+        lowest = data.site_xpos[index.corner_sites][:, :, 2].min(axis=1)
+        self.height = data.xpos[index.sole_body][:, 2] - lowest  # sole body above the floor when flat
+        self.quat0 = data.xquat[index.sole_body].copy()
+        # sole centre in the sole body's frame
+        self.centre_local = np.stack([data.xmat[b].reshape(3, 3).T @ (data.site_xpos[s_] - data.xpos[b])
+                                      for b, s_ in zip(index.sole_body, index.sole_site)])
+        self.leg_length = float(base[2] - data.xpos[index.sole_body][:, 2].mean())
+        self.foot_length = float(np.ptp(data.site_xpos[index.corner_sites[0]][:, 0]))
+
+    def flat_quat(self, foot: int, yaw: float) -> np.ndarray:
+        out = np.zeros(4)
+        mujoco.mju_mulQuat(out, np.array([np.cos((yaw - self.yaw0) / 2), 0, 0, np.sin((yaw - self.yaw0) / 2)]),
+                           self.quat0[foot])
+        return out
+
+    def hold(self, foot: int, xy: np.ndarray, yaw: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(position [3], orientation [4], sole centre [2]) of foot ``foot`` flat at ``xy``, ``yaw``."""
+        quat = self.flat_quat(foot, yaw)
+        pos = np.r_[xy, self.height[foot]]
+        rot = np.zeros(9)
+        mujoco.mju_quat2Mat(rot, quat)
+        centre = pos + rot.reshape(3, 3) @ self.centre_local[foot]
+        return pos, quat, centre[:2]
+
+
+def stance_offsets(feet: RobotFeet, qpos: np.ndarray, foot_xy: np.ndarray, contacts: np.ndarray,
+                   min_gap_per_leg: float = 0.12) -> np.ndarray:
+    """[2, 2] each foot's place relative to the base (in its heading frame) while standing: the
+    reference's median sideways offset of the sole body over the frames that foot is down (the
+    robot's nominal one where it never is), never closer to the other foot than the nominal
+    stance plus ``min_gap_per_leg`` x the leg length (feet that pass each other closer collide),
+    fore-aft centred under the base."""
+    yaw = heading(qpos)
+    c, s = np.cos(yaw), np.sin(yaw)
+    out = feet.offset.copy()
+    out[:, 0] = 0.0
+    for k in range(2):
+        down = np.asarray(contacts[:, k], dtype=bool)
+        if down.any():
+            rel = foot_xy[down, k] - qpos[down, :2]
+            out[k, 1] = float(np.median(-s[down] * rel[:, 0] + c[down] * rel[:, 1]))
+    half_gap = 0.5 * min_gap_per_leg * feet.leg_length
+    for k, sign in ((0, 1.0), (1, -1.0)):
+        out[k, 1] = sign * max(sign * out[k, 1], sign * feet.offset[k, 1] + half_gap)
+    return out
+
+
+def base_path(qpos: np.ndarray, fps: float, window_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The reference base's horizontal path [T, 2] and heading [T] (unwrapped), smoothed over
+    ``window_s`` (the sway of each step averaged out)."""
+    half = max(0, int(round(window_s * fps / 2)))
+    xy = np.asarray(qpos[:, :2], dtype=np.float64)
+    yaw = np.unwrap(heading(qpos))
+    if half:
+        kernel = np.ones(2 * half + 1) / (2 * half + 1)
+        xy = np.stack([np.convolve(np.pad(xy[:, a], half, mode="edge"), kernel, mode="valid") for a in range(2)], axis=1)
+        yaw = np.convolve(np.pad(yaw, half, mode="edge"), kernel, mode="valid")
+    return xy, yaw
+
+
+def time_warp_for(qpos: np.ndarray, fps: float, feet: RobotFeet, step_period_s: float, advance_per_leg: float,
+                  turn_per_step_rad: float, max_time_warp: float) -> float:
+    """How many times slower the robot must play ``qpos`` to follow its path with its own steps:
+    the largest ratio, over one-second windows, of the reference's speed (and turn rate) to the
+    robot's stepping speed (and turn rate)."""
+    xy, yaw = base_path(qpos, fps, step_period_s)
+    T = qpos.shape[0]
+    window = max(1, int(round(fps)))
+    if T <= window:
+        return 1.0
+    speed = np.linalg.norm(xy[window:] - xy[:-window], axis=1) * fps / window
+    turn = np.abs(yaw[window:] - yaw[:-window]) * fps / window
+    robot_speed = advance_per_leg * feet.leg_length / step_period_s
+    robot_turn = turn_per_step_rad / step_period_s
+    need = max(float(speed.max()) / robot_speed, float(turn.max()) / robot_turn, 1.0)
+    return float(min(need, max_time_warp))
+
+
+def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, step_period_s: float = 0.5,
+               double_support: float = 0.2, advance_per_leg: float = 0.27, turn_per_step_rad: float = 0.3,
+               clearance_per_leg: float = 0.15, first_foot: int = 1, feet: RobotFeet | None = None,
+               offsets: np.ndarray | None = None, lift_share: float = 0.15) -> StepSchedule:
+    """The robot's footsteps and foot trajectories for reference ``qpos`` [T, nq] at ``fps``:
+    both feet stand until ``first_step_frame``, then ``first_foot`` (0 left, 1 right) steps
+    first and the feet alternate (see the module docstring).  ``offsets`` [2, 2]: each foot's
+    place relative to the base while standing (default: the nominal stance).  The swing foot
+    rises and lands vertically over the first and last ``lift_share`` of the swing."""
+    feet = feet or RobotFeet(index)
+    offsets = feet.offset if offsets is None else np.asarray(offsets, dtype=np.float64)
+    T = qpos.shape[0]
+    xy, yaw = base_path(qpos, fps, step_period_s)
+    period = max(2, int(round(step_period_s * fps)))
+    ds = max(1, int(round(double_support * period)))
+    advance = advance_per_leg * feet.leg_length
+    lift = clearance_per_leg * feet.leg_length
+
+    def target(foot: int, frame: int) -> tuple[np.ndarray, float]:
+        f = int(np.clip(frame, 0, T - 1))
+        c, s = np.cos(yaw[f]), np.sin(yaw[f])
+        o = offsets[foot]
+        return xy[f] + np.array([c * o[0] - s * o[1], s * o[0] + c * o[1]]), float(yaw[f])
+
+    contacts = np.ones((T, 2), dtype=bool)
+    foot_pos = np.zeros((T, 2, 3))
+    foot_quat = np.zeros((T, 2, 4))
+    current = []
+    for k in range(2):
+        place, heading_k = target(k, 0)
+        pos, quat, centre = feet.hold(k, place, heading_k)
+        current.append([pos, quat, centre, heading_k, 0])  # pose, centre, yaw, start frame of the hold
+    footholds = []
+    swing = first_foot
+    t0 = int(first_step_frame)
+    steps = 0
+    while t0 + period <= T - 1:
+        land = t0 + period  # first frame of the next hold
+        stance = 1 - swing
+        goal, goal_yaw = target(swing, land + period // 2)
+        # the step limits, relative to where this foot would stand beside the stance foot
+        s_pos, _, _, s_yaw, _ = current[stance]
+        beside = _beside(offsets, stance, swing, s_pos[:2], s_yaw)
+        c, s = np.cos(s_yaw), np.sin(s_yaw)
+        d = goal - beside
+        local = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1]])
+        local = np.clip(local, [-advance, -0.5 * advance], [advance, 0.5 * advance])
+        if swing == 0:  # never step across the stance foot
+            local[1] = max(local[1], -0.25 * advance)
+        else:
+            local[1] = min(local[1], 0.25 * advance)
+        goal = beside + np.array([c * local[0] - s * local[1], s * local[0] + c * local[1]])
+        goal_yaw = s_yaw + float(np.clip(goal_yaw - s_yaw, -turn_per_step_rad, turn_per_step_rad))
+        p0, q0, _, yaw0, start0 = current[swing]
+        moved = np.linalg.norm(goal - p0[:2]) > 0.005 or abs(goal_yaw - yaw0) > 0.02
+        if not moved and land > T - 1 - period and np.linalg.norm(target(stance, T - 1)[0] - s_pos[:2]) < 0.005:
+            break  # the path has ended and both feet stand where it ends
+        if moved:
+            footholds.append(Foothold(swing, start0, t0 + ds - 1, p0, q0, current[swing][2]))
+            p1, q1, c1 = feet.hold(swing, goal, goal_yaw)
+            lift_frames = range(t0 + ds, land)
+            n = len(lift_frames)
+            for i, t in enumerate(lift_frames):
+                u = (i + 1) / (n + 1)
+                v = np.clip((u - lift_share) / (1 - 2 * lift_share), 0.0, 1.0)  # across only once up
+                ease = 10 * v ** 3 - 15 * v ** 4 + 6 * v ** 5
+                foot_pos[t, swing] = p0 + ease * (p1 - p0)
+                foot_pos[t, swing, 2] = p0[2] + ease * (p1[2] - p0[2]) + lift * np.sin(np.pi * u)
+                foot_quat[t, swing] = feet.flat_quat(swing, yaw0 + ease * (goal_yaw - yaw0))
+                contacts[t, swing] = False
+            current[swing] = [p1, q1, c1, goal_yaw, land]
+            steps += 1
+        swing = stance
+        t0 = land
+    for k in range(2):
+        footholds.append(Foothold(k, current[k][4], T - 1, current[k][0], current[k][1], current[k][2]))
+    footholds.sort(key=lambda f: (f.start, f.foot))
+    for f in footholds:
+        foot_pos[f.start:f.end + 1, f.foot] = f.pos
+        foot_quat[f.start:f.end + 1, f.foot] = f.quat
+    return StepSchedule(contacts=contacts, foot_pos=foot_pos, foot_quat=foot_quat, footholds=footholds, steps=steps)
+
+
+def _beside(offsets: np.ndarray, stance: int, swing: int, stance_xy: np.ndarray, yaw: float) -> np.ndarray:
+    """Where foot ``swing`` stands beside foot ``stance`` (at ``stance_xy``, heading ``yaw``)."""
+    o = offsets[swing] - offsets[stance]
+    c, s = np.cos(yaw), np.sin(yaw)
+    return stance_xy + np.array([c * o[0] - s * o[1], s * o[0] + c * o[1]])

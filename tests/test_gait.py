@@ -1,0 +1,174 @@
+"""Walking with the robot's own steps: footsteps along the reference's path, the ZMP-planned CoM,
+the stage's walk option, and validation's tracking of what the servos were commanded.
+
+Every test uses the shipped op3_like model and synthetic motions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from motok_robot.errors import InputError
+from motok_robot.feasibility.config import FeasibilityConfig, GaitConfig
+from motok_robot.feasibility.footsteps import RobotFeet, plan_steps, time_warp_for
+from motok_robot.feasibility.gait import com_path, generate_gait, zmp_reference
+from motok_robot.feasibility.stage import make_feasible, sole_contacts, walks, write_feasible
+from motok_robot.feasibility.zmp_shift import cart_table_zmp
+from motok_robot.robots import load
+from motok_robot.robots.index import index_robot
+from motok_robot.sim import synthetic as S
+from motok_robot.sim.validate import validate_file
+from retarget.io import RobotTrajectory
+
+FPS = 20.0
+
+
+@pytest.fixture(scope="module")
+def op3():
+    return index_robot(load("op3_like"))
+
+
+def _retargeted(index, qpos) -> RobotTrajectory:
+    T = qpos.shape[0]
+    return RobotTrajectory(qpos=qpos, joint_names=list(index.joint_names), robot=index.name, fps=FPS,
+                           contacts=sole_contacts(index, qpos, 0.005), keypoint_error=np.zeros((T, 1)),
+                           keypoint_names=["pelvis"], source=np.zeros((T, 22, 3), np.float32), solver_status=[])
+
+
+def _gliding(index, seconds: float, speed: float, rest_s: float = 0.0) -> np.ndarray:
+    """The nominal pose with its base moved forward at ``speed`` (m/s), then still for ``rest_s``:
+    a path, not a motion."""
+    T = int(round(seconds * FPS)) + 1
+    qpos = np.tile(index.nominal_qpos, (T + int(round(rest_s * FPS)), 1))
+    qpos[:, 0] += speed * np.minimum(np.arange(len(qpos)), T - 1) / FPS
+    return qpos
+
+
+def test_the_com_path_puts_its_cart_table_zmp_on_the_reference():
+    dt, height = 0.01, 0.25
+    zmp = np.zeros((300, 2))
+    zmp[100:200, 1] = 0.04  # the ZMP steps onto a foot 4 cm to the side for 1 s
+    path = com_path(zmp, height, dt, zmp[0], zmp[-1], jerk_weight=1e-7)
+    assert np.allclose(path[[0, -1]], 0.0, atol=1e-6)  # at rest where it starts and ends
+    com = np.c_[path, np.full(len(path), height)]
+    achieved = cart_table_zmp(com, 1.0 / dt)
+    steady = np.r_[20:80, 130:180, 230:280]
+    assert np.abs(achieved[steady] - zmp[steady]).max() < 0.003
+    assert 0.01 < path[150, 1] < 0.045  # the CoM sways toward the foot, not past it
+
+
+def test_footsteps_follow_the_path_within_the_step_limits(op3):
+    feet = RobotFeet(op3)
+    qpos = _gliding(op3, 4.0, 0.1, rest_s=1.0)  # the stage's lead-out: time for the last steps
+    schedule = plan_steps(op3, qpos, FPS, first_step_frame=12, advance_per_leg=0.27, clearance_per_leg=0.15, feet=feet)
+    assert schedule.steps >= 6
+    advance = 0.27 * feet.leg_length
+    by_foot = [[f for f in schedule.footholds if f.foot == k] for k in range(2)]
+    for k in range(2):
+        xs = np.array([f.pos[0] for f in by_foot[k]])
+        assert np.all(np.diff(xs) > 0) and np.diff(xs).max() <= 2 * advance + 1e-6  # forward, within the limit
+        assert abs(by_foot[k][-1].pos[0] - qpos[-1, 0]) < 0.02  # the last steps bring it where the path ends
+    # never both feet in the air; both down before the first step; feet lifted at mid-swing
+    assert schedule.contacts.any(axis=1).all() and schedule.contacts[:12].all()
+    swing = ~schedule.contacts
+    lifted = schedule.foot_pos[..., 2] - feet.height[None, :]
+    assert lifted[swing].max() > 0.9 * 0.15 * feet.leg_length
+    assert np.all(schedule.foot_pos[..., 2] >= feet.height[None, :] - 1e-9)  # never below the floor
+    # the ZMP reference stays on a planned foot
+    zmp = zmp_reference(schedule)
+    near = np.min(np.linalg.norm(zmp[:, None] - np.array([f.centre for f in schedule.footholds])[None], axis=2), axis=1)
+    single = schedule.contacts.sum(axis=1) == 1
+    assert near[single].max() < 1e-9
+
+
+def test_the_time_warp_slows_what_the_robot_cannot_step(op3):
+    feet = RobotFeet(op3)
+    robot_speed = 0.27 * feet.leg_length / 0.5
+    slow = time_warp_for(_gliding(op3, 4.0, 0.5 * robot_speed), FPS, feet, 0.5, 0.27, 0.3, 3.0)
+    fast = time_warp_for(_gliding(op3, 4.0, 2.0 * robot_speed), FPS, feet, 0.5, 0.27, 0.3, 3.0)
+    faster = time_warp_for(_gliding(op3, 4.0, 5.0 * robot_speed), FPS, feet, 0.5, 0.27, 0.3, 3.0)
+    assert slow == 1.0
+    assert fast == pytest.approx(2.0, rel=0.05)
+    assert faster == 3.0  # capped
+
+
+def test_the_whole_body_puts_the_feet_on_the_footholds_within_the_velocity_limits(op3):
+    qpos = _gliding(op3, 3.0, 0.06)
+    schedule = plan_steps(op3, qpos, FPS, first_step_frame=12)
+    walk = generate_gait(op3, qpos, FPS, schedule)
+    assert np.median(walk.foot_errors) < 0.002 and walk.com_error_m < 0.005
+    speed = np.abs(np.diff(walk.qpos[:, op3.qpos_adr], axis=0)) * FPS / op3.velocity_limit
+    assert speed.max() <= 0.9 + 1e-6
+    arms = [j for j, n in enumerate(op3.joint_names) if "sho" in n or "el" in n or "head" in n]
+    assert np.array_equal(walk.qpos[:, op3.qpos_adr[arms]], qpos[:, op3.qpos_adr[arms]])  # upper body kept
+
+
+def test_only_a_motion_that_goes_somewhere_is_walked(op3):
+    feet, config = RobotFeet(op3), GaitConfig()
+    assert walks(op3, S.walk(op3, steps=6, step_period_s=1.0, fps=FPS), feet, config)
+    assert not walks(op3, S.standing(op3, 2.0, FPS), feet, config)
+    assert not walks(op3, S.lift_foot_without_shift(op3, 3.0, FPS), feet, config)
+
+
+def test_the_stage_walks_a_walk_with_the_robots_steps_and_validation_passes_what_it_should(op3, tmp_path):
+    qpos = S.walk(op3, steps=6, step_period_s=1.0, fps=FPS, double_support=0.2)
+    result = make_feasible(_retargeted(op3, qpos), op3, FeasibilityConfig(gait=GaitConfig(enabled=True)))
+    record = result.record["gait"]
+    assert record["steps"] >= 6 and record["time_warp"] == 1.0
+    lead = int(round(record["lead_in_s"] * FPS))
+    out = result.trajectory
+    # the reference gained the lead-in and lead-out, and the task differs from it in the legs only
+    assert out.qpos.shape[0] == qpos.shape[0] + lead + int(round(record["lead_out_s"] * FPS))
+    assert np.array_equal(out.reference_qpos[lead:lead + qpos.shape[0]], qpos)
+    assert out.task_qpos is not None and not np.allclose(out.task_qpos, out.reference_qpos)
+    assert not result.fell
+    path = write_feasible(result, tmp_path, op3.name)
+    report = validate_file(path, op3, plots=False).report
+    for check in ("fall", "tracking", "base_drift", "fidelity_pose", "fidelity_heading", "joint_velocity"):
+        assert report["checks"][check]["passed"], (check, report["checks"][check]["value"])
+
+
+def test_tracking_is_judged_against_what_the_servos_were_commanded(op3, tmp_path):
+    walk = S.walk(op3, steps=2, step_period_s=3.2, fps=FPS)
+    result = make_feasible(_retargeted(op3, walk), op3, FeasibilityConfig())
+    path = write_feasible(result, tmp_path / "a", op3.name)
+    honest = validate_file(path, op3, plots=False).report["metrics"]["tracking_rmse_rad"]
+    # the same execution, claimed to follow a task with the knees bent 0.3 rad more
+    data = dict(np.load(path))
+    knees = op3.qpos_adr[[j for j, n in enumerate(op3.joint_names) if "knee" in n]]
+    data["task_qpos"] = data["task_qpos"].copy()
+    data["task_qpos"][:, knees] += 0.3
+    np.savez(tmp_path / "claimed.npz", **data)
+    claimed = validate_file(tmp_path / "claimed.npz", op3, plots=False).report["metrics"]["tracking_rmse_rad"]
+    assert honest < 0.05 and claimed > honest + 0.05
+    data["task_qpos"] = data["task_qpos"][:-1]
+    np.savez(tmp_path / "bad.npz", **data)
+    with pytest.raises(InputError, match="task_qpos"):
+        validate_file(tmp_path / "bad.npz", op3, plots=False)
+
+
+def test_gait_settings_are_bounded():
+    with pytest.raises(InputError, match="step_period_s"):
+        GaitConfig(step_period_s=0.05)
+    with pytest.raises(InputError, match="max_time_warp"):
+        GaitConfig(max_time_warp=10)
+
+
+def test_run_and_feasible_offer_the_own_steps_walk():
+    import argparse
+
+    from motok_robot.feasibility.cli import register as register_feasible
+    from motok_robot.pipeline.cli import feasibility_config
+    from motok_robot.pipeline.cli import register as register_run
+
+    parser = argparse.ArgumentParser()
+    commands = parser.add_subparsers()
+    register_run(commands, {})
+    register_feasible(commands, {})
+    config = feasibility_config(parser.parse_args(["run", "a person walks", "--out", "o", "--feasible", "--feasible-own-steps"]))
+    assert config.gait.enabled
+    assert not feasibility_config(parser.parse_args(["run", "a person walks", "--out", "o", "--feasible"])).gait.enabled
+    with pytest.raises(InputError, match="--feasible-own-steps needs --feasible"):
+        feasibility_config(parser.parse_args(["run", "a person walks", "--out", "o", "--feasible-own-steps"]))
+    assert parser.parse_args(["feasible", "robot.npz", "--out", "o", "--own-steps"]).own_steps
