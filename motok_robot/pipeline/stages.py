@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import hashlib
+import json
 import time
 import warnings
 from pathlib import Path
@@ -103,7 +104,8 @@ def run_stages(pipe, req, entry, tmp: Path, timings, bar, state, constraints, co
             acceleration_weight = cfg.balance_acceleration_weight
         timings["balance"] = time.perf_counter() - t
     notes[:0] = retargeting_notes(rt)
-    retime_factor = 1.0
+    # how many times slower than the human the robot plays it (the feasibility stage's time warp)
+    retime_factor = json.loads(files["feasibility"].read_text())["time_warp"] if servo_goals is not None else 1.0
     too_fast = SPEED_CHECKS.intersection(validation.report["failed_checks"])
     if too_fast and cfg.max_retime > 1.0 and servo_goals is None:
         stage("retime")
