@@ -172,3 +172,17 @@ def test_run_and_feasible_offer_the_own_steps_walk():
     with pytest.raises(InputError, match="--feasible-own-steps needs --feasible"):
         feasibility_config(parser.parse_args(["run", "a person walks", "--out", "o", "--feasible-own-steps"]))
     assert parser.parse_args(["feasible", "robot.npz", "--out", "o", "--own-steps"]).own_steps
+
+
+@pytest.mark.slow
+def test_run_reports_the_feasibility_stages_time_warp(tmp_path):
+    """``run --feasible`` records how many times slower the robot plays the motion (about 10 s)."""
+    from pathlib import Path
+
+    from motok_robot.pipeline import Pipeline, PipelineConfig
+
+    demo = Path(__file__).resolve().parents[1] / "examples" / "wave_demo.npz"
+    pipe = Pipeline(PipelineConfig(plots=False, max_retime=1.0, feasibility=FeasibilityConfig(retime=1.5)))
+    result = pipe.run(None, motion=demo, out_dir=tmp_path / "wave", render=False)
+    assert result.retime_factor == pytest.approx(1.5)
+    assert any("time warp 1.50x" in note for note in result.notes)
