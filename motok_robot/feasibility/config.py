@@ -156,6 +156,9 @@ class GaitConfig:
     clearance_per_leg: float = 0.15
     #: the swing foot rises and lands vertically over this share of the swing at each end
     vertical_share: float = 0.15
+    #: the ZMP target of a stance foot lies this far (per leg length) outward of its sole centre
+    #: (0.04 on op3_like = 1 cm): the CoM then stands over the stance foot where its sway turns
+    zmp_outward_per_leg: float = 0.04
     #: standing on both feet before the first step and after the reference ends (s): a robot
     #: starts from rest, and the last steps bring the feet together
     lead_in_s: float = 0.6
@@ -171,7 +174,7 @@ class GaitConfig:
 
     def __post_init__(self):
         for name, low, high in (("step_period_s", 0.2, 2.0), ("double_support", 0.05, 0.8), ("advance_per_leg", 0.02, 1.0),
-                                ("turn_per_step_rad", 0.0, 1.0), ("clearance_per_leg", 0.0, 0.5), ("vertical_share", 0.0, 0.45), ("lead_in_s", 0.0, 5.0),
+                                ("turn_per_step_rad", 0.0, 1.0), ("clearance_per_leg", 0.0, 0.5), ("vertical_share", 0.0, 0.45), ("zmp_outward_per_leg", 0.0, 0.2), ("lead_in_s", 0.0, 5.0),
                                 ("lead_out_s", 0.0, 5.0), ("max_time_warp", 1.0, 4.0), ("min_travel_per_leg", 0.0, 10.0),
                                 ("max_lift_per_leg", 0.0, 2.0)):
             value = float(getattr(self, name))

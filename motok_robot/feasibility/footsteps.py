@@ -41,7 +41,7 @@ class Foothold:
     end: int          # last frame down
     pos: np.ndarray   # [3] sole body position
     quat: np.ndarray  # [4] sole body orientation
-    centre: np.ndarray  # [2] sole centre (the ZMP target while this foot carries the robot)
+    centre: np.ndarray  # [2] the ZMP target while this foot carries the robot (its sole centre, moved outward)
 
 
 @dataclass
@@ -152,12 +152,16 @@ def time_warp_for(qpos: np.ndarray, fps: float, feet: RobotFeet, step_period_s: 
 def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, step_period_s: float = 0.5,
                double_support: float = 0.2, advance_per_leg: float = 0.27, turn_per_step_rad: float = 0.3,
                clearance_per_leg: float = 0.15, first_foot: int = 1, feet: RobotFeet | None = None,
-               offsets: np.ndarray | None = None, lift_share: float = 0.15) -> StepSchedule:
+               offsets: np.ndarray | None = None, lift_share: float = 0.15,
+               zmp_outward_per_leg: float = 0.04) -> StepSchedule:
     """The robot's footsteps and foot trajectories for reference ``qpos`` [T, nq] at ``fps``:
     both feet stand until ``first_step_frame``, then ``first_foot`` (0 left, 1 right) steps
     first and the feet alternate (see the module docstring).  ``offsets`` [2, 2]: each foot's
     place relative to the base while standing (default: the nominal stance).  The swing foot
-    rises and lands vertically over the first and last ``lift_share`` of the swing."""
+    rises and lands vertically over the first and last ``lift_share`` of the swing.  The ZMP
+    target of a foothold is its sole centre moved ``zmp_outward_per_leg`` leg lengths away from
+    the other foot: the CoM then sways far enough to stand over the stance foot where it slows
+    down at the end of its sway."""
     feet = feet or RobotFeet(index)
     offsets = feet.offset if offsets is None else np.asarray(offsets, dtype=np.float64)
     T = qpos.shape[0]
@@ -166,6 +170,12 @@ def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, st
     ds = max(1, int(round(double_support * period)))
     advance = advance_per_leg * feet.leg_length
     lift = clearance_per_leg * feet.leg_length
+    outward = zmp_outward_per_leg * feet.leg_length
+
+    def hold(foot: int, xy: np.ndarray, yaw: float):
+        pos, quat, centre = feet.hold(foot, xy, yaw)
+        side = 1.0 if foot == 0 else -1.0  # the left foot is on the +y side of the heading frame
+        return pos, quat, centre + side * outward * np.array([-np.sin(yaw), np.cos(yaw)])
 
     def target(foot: int, frame: int) -> tuple[np.ndarray, float]:
         f = int(np.clip(frame, 0, T - 1))
@@ -179,7 +189,7 @@ def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, st
     current = []
     for k in range(2):
         place, heading_k = target(k, 0)
-        pos, quat, centre = feet.hold(k, place, heading_k)
+        pos, quat, centre = hold(k, place, heading_k)
         current.append([pos, quat, centre, heading_k, 0])  # pose, centre, yaw, start frame of the hold
     footholds = []
     swing = first_foot
@@ -208,7 +218,7 @@ def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, st
             break  # the path has ended and both feet stand where it ends
         if moved:
             footholds.append(Foothold(swing, start0, t0 + ds - 1, p0, q0, current[swing][2]))
-            p1, q1, c1 = feet.hold(swing, goal, goal_yaw)
+            p1, q1, c1 = hold(swing, goal, goal_yaw)
             lift_frames = range(t0 + ds, land)
             n = len(lift_frames)
             for i, t in enumerate(lift_frames):

@@ -124,7 +124,7 @@ def walk_task(trajectory, index, config, record: dict):
                           double_support=gait.double_support, advance_per_leg=gait.advance_per_leg,
                           turn_per_step_rad=gait.turn_per_step_rad, clearance_per_leg=gait.clearance_per_leg,
                           first_foot=first_lifted_foot(contacts), feet=feet, offsets=offsets,
-                          lift_share=gait.vertical_share)
+                          lift_share=gait.vertical_share, zmp_outward_per_leg=gait.zmp_outward_per_leg)
     walk = generate_gait(index, reference, fps, schedule, base_yaw=base_path(reference, fps, gait.step_period_s)[1])
     record["gait"] = {"time_warp": warp, "lead_in_s": before / fps, "lead_out_s": round(gait.lead_out_s * fps) / fps,
                       **schedule.record(), **walk.record()}
