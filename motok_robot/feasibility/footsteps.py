@@ -4,7 +4,7 @@ A human walk retargeted to a 0.5 m robot keeps the human's stride: on op3_like a
 steps 15-18 cm per step, 1.4 foot lengths, with support passing between the feet within one
 20 fps frame.  The robot cannot execute that stride: played as retargeted it falls in half the
 clips, played slower it falls more often, and a gait on the human's footholds with a planned
-CoM falls as often (docs/experiments/2026-12-02-generated-gait.md).  A synthetic walk of half
+CoM falls as often (docs/experiments/2026-12-02-own-steps.md).  A synthetic walk of half
 a foot length per step stays up at the same cadence.  So the robot walks the reference's path
 with steps of its own:
 
