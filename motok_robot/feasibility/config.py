@@ -148,11 +148,11 @@ class GaitConfig:
     step_period_s: float = 0.5
     double_support: float = 0.2
     #: the longest step (how far a foot lands ahead of the other), per leg length; 0.27 on
-    #: op3_like = 6 cm, half a foot length: the synthetic walk that stays up at 0.5 s a step
+    #: op3_like = 6.8 cm, about half a foot length: the synthetic walk that stays up at 0.5 s a step
     advance_per_leg: float = 0.27
     #: the largest turn of a foot per step (rad)
     turn_per_step_rad: float = 0.3
-    #: how high the swing foot lifts at mid-swing, per leg length (0.15 on op3_like = 3.3 cm)
+    #: how high the swing foot lifts at mid-swing, per leg length (0.15 on op3_like = 3.8 cm)
     clearance_per_leg: float = 0.15
     #: the swing foot rises and lands vertically over this share of the swing at each end
     vertical_share: float = 0.15
@@ -173,9 +173,11 @@ class GaitConfig:
     max_lift_per_leg: float = 0.3
 
     def __post_init__(self):
-        for name, low, high in (("step_period_s", 0.2, 2.0), ("double_support", 0.05, 0.8), ("advance_per_leg", 0.02, 1.0),
-                                ("turn_per_step_rad", 0.0, 1.0), ("clearance_per_leg", 0.0, 0.5), ("vertical_share", 0.0, 0.45), ("zmp_outward_per_leg", 0.0, 0.2), ("lead_in_s", 0.0, 5.0),
-                                ("lead_out_s", 0.0, 5.0), ("max_time_warp", 1.0, 4.0), ("min_travel_per_leg", 0.0, 10.0),
+        for name, low, high in (("step_period_s", 0.2, 2.0), ("double_support", 0.05, 0.8),
+                                ("advance_per_leg", 0.02, 1.0), ("turn_per_step_rad", 0.0, 1.0),
+                                ("clearance_per_leg", 0.0, 0.5), ("vertical_share", 0.0, 0.45),
+                                ("zmp_outward_per_leg", 0.0, 0.2), ("lead_in_s", 0.0, 5.0), ("lead_out_s", 0.0, 5.0),
+                                ("max_time_warp", 1.0, 4.0), ("min_travel_per_leg", 0.0, 10.0),
                                 ("max_lift_per_leg", 0.0, 2.0)):
             value = float(getattr(self, name))
             if not low <= value <= high:
