@@ -1,8 +1,8 @@
 """The whole-body walking motion for a footstep schedule: a CoM path planned from the ZMP.
 
 Given the robot's footsteps (:mod:`.footsteps`) and a reference motion (the upper body, the
-base height, roll and pitch to keep; the heading may be given smoothed), this builds what the robot's balance depends on, as a
-biped walking pattern generator does:
+base height, roll and pitch to keep; the heading may be given smoothed), this builds what the
+robot's balance depends on, as a biped walking pattern generator does:
 
 1. **A ZMP reference that walks from foothold to foothold**: on the stance foot's sole centre in
    single support, moving linearly across in double support, between the feet before the first
@@ -48,20 +48,17 @@ class GaitResult:
         return {"foot_error_m_max": float(self.foot_errors.max()), "foot_error_m_mean": float(self.foot_errors.mean()),
                 "com_error_m": self.com_error_m, "base_drop_m": self.base_drop_m}
 
-def _foot_poses(index, qpos: np.ndarray):
-    model = index.kin_model
-    data = mujoco.MjData(model)
-    T = qpos.shape[0]
-    pos, quat, centre, com = np.zeros((T, 2, 3)), np.zeros((T, 2, 4)), np.zeros((T, 2, 3)), np.zeros((T, 3))
-    for t in range(T):
+
+def _com(index, qpos: np.ndarray) -> np.ndarray:
+    """The whole robot's centre of mass [T, 3] along ``qpos`` [T, nq]."""
+    data = mujoco.MjData(index.kin_model)
+    com = np.zeros((qpos.shape[0], 3))
+    for t in range(qpos.shape[0]):
         data.qpos[:] = qpos[t]
-        mujoco.mj_kinematics(model, data)
-        mujoco.mj_comPos(model, data)
-        pos[t] = data.xpos[index.sole_body]
-        quat[t] = data.xquat[index.sole_body]
-        centre[t] = data.site_xpos[index.sole_site]
+        mujoco.mj_kinematics(index.kin_model, data)
+        mujoco.mj_comPos(index.kin_model, data)
         com[t] = data.subtree_com[index.root_body]
-    return pos, quat, centre, com
+    return com
 
 
 def _hips_and_reach(index, legs, margin: float = 0.97):
@@ -136,7 +133,9 @@ def zmp_reference(schedule: StepSchedule) -> np.ndarray:
         for v in range(t, u + 1):
             w = (v - t + 1) / (u - t + 2)
             mid = centre[v].mean(axis=0)
-            zmp[v] = (1 - w) * (mid if before is None else centre[v, before]) + w * (mid if after is None else centre[v, after])
+            start = mid if before is None else centre[v, before]
+            end = mid if after is None else centre[v, after]
+            zmp[v] = (1 - w) * start + w * end
         t = u + 1
     return zmp
 
@@ -154,7 +153,7 @@ def generate_gait(index, qpos: np.ndarray, fps: float, schedule: StepSchedule, *
         qpos[:, 3:7] = with_yaw(qpos[:, 3:7], base_yaw)
     T = qpos.shape[0]
     foot_pos, foot_quat = schedule.foot_pos, schedule.foot_quat
-    com = _foot_poses(index, qpos)[3]
+    com = _com(index, qpos)
     zmp = zmp_reference(schedule)
     # CoM path at rate_hz over the clip, sampled back at the frames
     n = max(4, int(round((T - 1) / fps * rate_hz)) + 1)
@@ -193,12 +192,13 @@ def generate_gait(index, qpos: np.ndarray, fps: float, schedule: StepSchedule, *
                 flat = min(float(np.hypot(d[0], d[1])), reach[k])
                 need[t] = max(need[t], float(d[2]) - np.sqrt(reach[k] ** 2 - flat ** 2))
             if t and velocity_fraction > 0:  # the servos' velocity limits, as retargeting keeps them
-                out[t, leg_q] = np.clip(out[t, leg_q], out[t - 1, leg_q] - max_step[leg_q], out[t - 1, leg_q] + max_step[leg_q])
+                last = out[t - 1, leg_q]
+                out[t, leg_q] = np.clip(out[t, leg_q], last - max_step[leg_q], last + max_step[leg_q])
                 errors[t] = solve_legs(index, out[t], foot_pos[t], foot_quat[t], legs, data,
                                        previous=out[t - 1], max_step=max_step)
             else:
                 errors[t] = solve_legs(index, out[t], foot_pos[t], foot_quat[t], legs, data)
-        current = _foot_poses(index, out)[3][:, :2]
+        current = _com(index, out)[:, :2]
         if need.max() <= 0:
             break
         spread = np.array([need[max(0, t - window):t + window + 1].max() for t in range(T)])
