@@ -51,6 +51,7 @@ class StepSchedule:
     foot_quat: np.ndarray  # [T, 2, 4]
     footholds: list        # [Foothold], in time order
     steps: int             # number of swings
+    heading: np.ndarray    # [T] the smoothed reference heading the footholds turn with (rad)
 
     def record(self) -> dict:
         return {"steps": self.steps, "double_support_fraction": float(np.mean(self.contacts.all(axis=1))),
@@ -239,7 +240,8 @@ def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, st
     for f in footholds:
         foot_pos[f.start:f.end + 1, f.foot] = f.pos
         foot_quat[f.start:f.end + 1, f.foot] = f.quat
-    return StepSchedule(contacts=contacts, foot_pos=foot_pos, foot_quat=foot_quat, footholds=footholds, steps=steps)
+    return StepSchedule(contacts=contacts, foot_pos=foot_pos, foot_quat=foot_quat, footholds=footholds, steps=steps,
+                        heading=yaw)
 
 
 def _beside(offsets: np.ndarray, stance: int, swing: int, stance_xy: np.ndarray, yaw: float) -> np.ndarray:

@@ -35,7 +35,7 @@ import numpy as np
 from motok_robot.feasibility.balance import BalancePlan, build_plan
 from motok_robot.feasibility.config import FeasibilityConfig
 from motok_robot.feasibility.dynamics import required_torque
-from motok_robot.feasibility.footsteps import RobotFeet, base_path, plan_steps, stance_offsets, time_warp_for
+from motok_robot.feasibility.footsteps import RobotFeet, plan_steps, stance_offsets, time_warp_for
 from motok_robot.feasibility.gait import generate_gait
 from motok_robot.feasibility.feedforward import GOALS_FILE, feedforward_goals, save_servo_goals, servo_gains
 from motok_robot.feasibility.physics import execute, servo_model
@@ -59,13 +59,7 @@ class FeasibleResult:
 
 def sole_contacts(index, qpos: np.ndarray, contact_height_m: float) -> np.ndarray:
     """bool [T, 2]: a foot is down where its lowest sole corner is below ``contact_height_m``."""
-    data = mujoco.MjData(index.kin_model)
-    out = np.zeros((qpos.shape[0], 2), dtype=bool)
-    for t in range(qpos.shape[0]):
-        data.qpos[:] = qpos[t]
-        mujoco.mj_kinematics(index.kin_model, data)
-        out[t] = data.site_xpos[index.corner_sites][:, :, 2].min(axis=1) < contact_height_m
-    return out
+    return _soles(index, qpos)[1] < contact_height_m
 
 
 def _soles(index, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -80,11 +74,12 @@ def _soles(index, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return xy, low
 
 
-def walks(index, qpos: np.ndarray, feet, config) -> bool:
+def walks(index, qpos: np.ndarray, feet, config, soles: tuple | None = None) -> bool:
     """Whether ``qpos`` [T, nq] is a walk to re-plan: both soles travel farther than
     ``config.min_travel_per_leg`` leg lengths over the clip, and no sole corner rises above
-    ``config.max_lift_per_leg`` leg lengths (a kick or a jump keeps its retargeted legs)."""
-    xy, low = _soles(index, qpos)
+    ``config.max_lift_per_leg`` leg lengths (a kick that high keeps its retargeted legs).
+    ``soles``: :func:`_soles` of ``qpos`` when the caller has it."""
+    xy, low = soles if soles is not None else _soles(index, qpos)
     travel = np.linalg.norm(np.diff(xy, axis=0), axis=2).sum(axis=0)
     return bool(travel.min() > config.min_travel_per_leg * feet.leg_length
                 and low.max() < config.max_lift_per_leg * feet.leg_length)
@@ -109,23 +104,24 @@ def walk_task(trajectory, index, config, record: dict):
     fps = float(trajectory.fps)
     feet = RobotFeet(index)
     qpos = np.asarray(trajectory.qpos, dtype=np.float64)
-    if not walks(index, qpos, feet, gait):
+    soles = _soles(index, qpos)
+    if not walks(index, qpos, feet, gait, soles):
         return None
     warp = time_warp_for(qpos, fps, feet, gait.step_period_s, gait.advance_per_leg, gait.turn_per_step_rad,
                          gait.max_time_warp)
-    contacts = sole_contacts(index, qpos, config.contact_height_m)
+    contacts = soles[1] < config.contact_height_m  # as sole_contacts
     if warp > 1.0:
         trajectory = retime(trajectory, warp)
     before = int(round(gait.lead_in_s * fps))
     trajectory = hold_ends(trajectory, before, int(round(gait.lead_out_s * fps)))
     reference = np.asarray(trajectory.qpos, dtype=np.float64)
-    offsets = stance_offsets(feet, qpos, _soles(index, qpos)[0], contacts)
+    offsets = stance_offsets(feet, qpos, soles[0], contacts)
     schedule = plan_steps(index, reference, fps, first_step_frame=before, step_period_s=gait.step_period_s,
                           double_support=gait.double_support, advance_per_leg=gait.advance_per_leg,
                           turn_per_step_rad=gait.turn_per_step_rad, clearance_per_leg=gait.clearance_per_leg,
                           first_foot=first_lifted_foot(contacts), feet=feet, offsets=offsets,
                           lift_share=gait.vertical_share, zmp_outward_per_leg=gait.zmp_outward_per_leg)
-    walk = generate_gait(index, reference, fps, schedule, base_yaw=base_path(reference, fps, gait.step_period_s)[1])
+    walk = generate_gait(index, reference, fps, schedule, base_yaw=schedule.heading)
     record["gait"] = {"time_warp": warp, "lead_in_s": before / fps, "lead_out_s": round(gait.lead_out_s * fps) / fps,
                       **schedule.record(), **walk.record()}
     return trajectory, walk.qpos, walk.contacts
