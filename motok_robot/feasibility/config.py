@@ -19,6 +19,15 @@ from motok_robot.errors import InputError
 ROLES = ("ankle_pitch", "ankle_roll", "knee", "hip_pitch", "hip_roll", "hip_yaw")
 
 
+def _check_ranges(what: str, config, ranges) -> None:
+    """InputError naming ``what`` and the field when a field of ``config`` lies outside its
+    ``(name, low, high)`` range."""
+    for name, low, high in ranges:
+        value = float(getattr(config, name))
+        if not low <= value <= high:
+            raise InputError(f"{what} {name} = {value}: must lie in [{low}, {high}]")
+
+
 def _default_tilt_gain() -> dict:
     # no attitude (P) feedback by default: on op3_like every tilt gain tried (ankle +-1 and 2,
     # hip +-1 rad/rad) lowered the push a standing robot survives, with or without gyro damping
@@ -66,12 +75,9 @@ class BalanceConfig:
             for role, value in gains.items():
                 if not (isinstance(value, (int, float)) and abs(float(value)) < 10):
                     raise InputError(f"balance {name}.{role} = {value!r}: expected a number of magnitude < 10")
-        checks = (("rate_hz", 1.0, 2000.0), ("swing_share", 0.0, 1.0), ("accel_weight", 0.0, 1.0),
-                  ("gyro_filter", 1e-3, 1.0), ("max_offset_rad", 0.0, 1.0))
-        for name, low, high in checks:
-            value = float(getattr(self, name))
-            if not low <= value <= high:
-                raise InputError(f"balance {name} = {value}: must lie in [{low}, {high}]")
+        _check_ranges("balance", self, (("rate_hz", 1.0, 2000.0), ("swing_share", 0.0, 1.0),
+                                        ("accel_weight", 0.0, 1.0), ("gyro_filter", 1e-3, 1.0),
+                                        ("max_offset_rad", 0.0, 1.0)))
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -125,11 +131,8 @@ class RefineConfig:
     def __post_init__(self):
         if not 1 <= int(self.samples) <= 4096:
             raise InputError(f"refine samples = {self.samples}: must lie in [1, 4096]")
-        for name, low, high in (("horizon_s", 0.01, 5.0), ("replan_s", 0.008, 5.0), ("knot_s", 0.01, 2.0),
-                                ("noise_rad", 0.0, 1.0), ("max_offset_rad", 0.0, 1.5)):
-            value = float(getattr(self, name))
-            if not low <= value <= high:
-                raise InputError(f"refine {name} = {value}: must lie in [{low}, {high}]")
+        _check_ranges("refine", self, (("horizon_s", 0.01, 5.0), ("replan_s", 0.008, 5.0), ("knot_s", 0.01, 2.0),
+                                       ("noise_rad", 0.0, 1.0), ("max_offset_rad", 0.0, 1.5)))
         if self.joints not in ("legs", "all"):
             raise InputError(f"refine joints = {self.joints!r}: use legs or all")
 
@@ -173,15 +176,12 @@ class GaitConfig:
     max_lift_per_leg: float = 0.3
 
     def __post_init__(self):
-        for name, low, high in (("step_period_s", 0.2, 2.0), ("double_support", 0.05, 0.8),
-                                ("advance_per_leg", 0.02, 1.0), ("turn_per_step_rad", 0.0, 1.0),
-                                ("clearance_per_leg", 0.0, 0.5), ("vertical_share", 0.0, 0.45),
-                                ("zmp_outward_per_leg", 0.0, 0.2), ("lead_in_s", 0.0, 5.0), ("lead_out_s", 0.0, 5.0),
-                                ("max_time_warp", 1.0, 4.0), ("min_travel_per_leg", 0.0, 10.0),
-                                ("max_lift_per_leg", 0.0, 2.0)):
-            value = float(getattr(self, name))
-            if not low <= value <= high:
-                raise InputError(f"gait {name} = {value}: must lie in [{low}, {high}]")
+        _check_ranges("gait", self, (("step_period_s", 0.2, 2.0), ("double_support", 0.05, 0.8),
+                                     ("advance_per_leg", 0.02, 1.0), ("turn_per_step_rad", 0.0, 1.0),
+                                     ("clearance_per_leg", 0.0, 0.5), ("vertical_share", 0.0, 0.45),
+                                     ("zmp_outward_per_leg", 0.0, 0.2), ("lead_in_s", 0.0, 5.0),
+                                     ("lead_out_s", 0.0, 5.0), ("max_time_warp", 1.0, 4.0),
+                                     ("min_travel_per_leg", 0.0, 10.0), ("max_lift_per_leg", 0.0, 2.0)))
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
