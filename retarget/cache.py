@@ -84,7 +84,8 @@ def _sha256(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def _file_sha256(path: Path) -> str:
+def file_sha256(path: Path) -> str:
+    """Hex sha256 of the file's bytes, read 1 MB at a time."""
     h = hashlib.sha256()
     with open(path, "rb") as fh:
         for chunk in iter(lambda: fh.read(1 << 20), b""):
@@ -237,7 +238,7 @@ class ProblemCache:
             raise ValueError(f"built with CasADi {meta.get('casadi')}, this is {ca.__version__}")
         if not so.exists():
             raise ValueError("the shared library is missing")
-        if _file_sha256(so) != meta["so_sha256"]:
+        if file_sha256(so) != meta["so_sha256"]:
             raise ValueError("the shared library does not match its checksum")
         prefix = meta["prefix"]
         names = {"nlp": "nlp", "grad_f": "nlp_grad_f", "jac_g": "nlp_jac_g", "hess_lag": "nlp_hess_l"}
@@ -414,7 +415,7 @@ def compile_entry(work: Path, key: str, cc: str, nice: bool = True) -> bool:
         subprocess.run([cc, *CFLAGS, *map(str, sources), "-o", str(lib), "-lm"], check=True,
                        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         meta = json.loads((work / "meta.json").read_text())
-        meta["so_sha256"] = _file_sha256(lib)
+        meta["so_sha256"] = file_sha256(lib)
         meta["compiler"] = cc
         os.replace(lib, folder / f"{key}.so")
         tmp = work / "entry.json"

@@ -13,7 +13,6 @@ The fixed-rate loop that streams them is :mod:`motok_robot.servo.streamer`.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import warnings
@@ -26,6 +25,7 @@ from motok_robot.errors import InputError
 from motok_robot.limits import check_frames, check_joints, check_rate, check_seconds
 from motok_robot.npz_files import read_npz_fields, scalar_field
 from motok_robot.servo.convert import ServoMap
+from retarget.cache import file_sha256  # the digest a report's input.sha256 records
 
 #: qpos columns before the joints in robot.npz: free base position (3) + quaternion wxyz (4)
 FREE_BASE = 7
@@ -225,13 +225,6 @@ def _description_problem(report: dict, path: Path, robot_sha256: str) -> str | N
     return None
 
 
-def file_sha256(path: Path) -> str:
-    """Hex sha256 of the file's bytes (what a report's ``input.sha256`` records)."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def plan_targets(trajectory: Trajectory, start_ticks: np.ndarray, servo_map: ServoMap, rate_hz: float,
