@@ -27,6 +27,24 @@ def shared_datasets() -> Path:
     return SHARED_DATASETS
 
 
+@pytest.fixture(scope="session")
+def retargeted():
+    """``retargeted(index, qpos, fps=20.0)``: a robot.npz-like trajectory of ``qpos`` [T, nq] as
+    retargeting would write it (contacts from the soles, empty keypoints and source)."""
+    import numpy as np
+
+    from motok_robot.feasibility.stage import sole_contacts
+    from retarget.io import RobotTrajectory
+
+    def build(index, qpos, fps: float = 20.0) -> RobotTrajectory:
+        T = qpos.shape[0]
+        return RobotTrajectory(qpos=qpos, joint_names=list(index.joint_names), robot=index.name, fps=fps,
+                               contacts=sole_contacts(index, qpos, 0.005), keypoint_error=np.zeros((T, 1)),
+                               keypoint_names=["pelvis"], source=np.zeros((T, 22, 3), np.float32), solver_status=[])
+
+    return build
+
+
 def pytest_addoption(parser):
     parser.addoption("--run-slow", action="store_true", default=False,
                      help="also run the tests marked slow (what CI and the README's test command run)")

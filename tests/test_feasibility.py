@@ -22,7 +22,6 @@ from motok_robot.robots.index import index_robot
 from motok_robot.sim import synthetic as S
 from motok_robot.sim.trajectory import RobotTrajectory
 from motok_robot.sim.validate import validate_file, validate_trajectory
-from retarget.io import RobotTrajectory as RetargetTrajectory
 
 FPS = 20.0
 
@@ -30,14 +29,6 @@ FPS = 20.0
 @pytest.fixture(scope="module")
 def op3():
     return index_robot(load("op3_like"))
-
-
-def _retargeted(index, qpos) -> RetargetTrajectory:
-    """A robot.npz-like trajectory of ``qpos`` as retargeting would write it."""
-    T = qpos.shape[0]
-    return RetargetTrajectory(qpos=qpos, joint_names=list(index.joint_names), robot=index.name, fps=FPS,
-                              contacts=sole_contacts(index, qpos, 0.005), keypoint_error=np.zeros((T, 1)),
-                              keypoint_names=["pelvis"], source=np.zeros((T, 22, 3), np.float32), solver_status=[])
 
 
 def _max_tilt_after_push(index, force_n, balance: bool) -> float:
@@ -135,9 +126,9 @@ def test_refinement_improves_a_deliberately_infeasible_reference(op3):
     assert np.array_equal(again, result.executed_qpos)  # the refined goals replay what was planned
 
 
-def test_an_executed_trajectory_validates_against_its_reference(op3, tmp_path):
+def test_an_executed_trajectory_validates_against_its_reference(op3, tmp_path, retargeted):
     qpos = S.walk(op3, steps=2, step_period_s=3.2, fps=FPS)
-    result = make_feasible(_retargeted(op3, qpos), op3, FeasibilityConfig())
+    result = make_feasible(retargeted(op3, qpos), op3, FeasibilityConfig())
     path = write_feasible(result, tmp_path, op3.name)
     goals = load_servo_goals(tmp_path / "servo_goals.npz")
     assert goals["mode"] == "feasibility" and goals["plan"] is not None

@@ -13,13 +13,12 @@ from motok_robot.errors import InputError
 from motok_robot.feasibility.config import FeasibilityConfig, GaitConfig
 from motok_robot.feasibility.footsteps import RobotFeet, plan_steps, time_warp_for
 from motok_robot.feasibility.gait import com_path, generate_gait, zmp_reference
-from motok_robot.feasibility.stage import make_feasible, sole_contacts, walks, write_feasible
+from motok_robot.feasibility.stage import make_feasible, walks, write_feasible
 from motok_robot.feasibility.zmp_shift import cart_table_zmp
 from motok_robot.robots import load
 from motok_robot.robots.index import index_robot
 from motok_robot.sim import synthetic as S
 from motok_robot.sim.validate import validate_file
-from retarget.io import RobotTrajectory
 
 FPS = 20.0
 
@@ -27,13 +26,6 @@ FPS = 20.0
 @pytest.fixture(scope="module")
 def op3():
     return index_robot(load("op3_like"))
-
-
-def _retargeted(index, qpos) -> RobotTrajectory:
-    T = qpos.shape[0]
-    return RobotTrajectory(qpos=qpos, joint_names=list(index.joint_names), robot=index.name, fps=FPS,
-                           contacts=sole_contacts(index, qpos, 0.005), keypoint_error=np.zeros((T, 1)),
-                           keypoint_names=["pelvis"], source=np.zeros((T, 22, 3), np.float32), solver_status=[])
 
 
 def _gliding(index, seconds: float, speed: float, rest_s: float = 0.0) -> np.ndarray:
@@ -111,9 +103,9 @@ def test_only_a_motion_that_goes_somewhere_is_walked(op3):
     assert not walks(op3, S.lift_foot_without_shift(op3, 3.0, FPS), feet, config)
 
 
-def test_the_stage_walks_a_walk_with_the_robots_steps_and_validation_passes_what_it_should(op3, tmp_path):
+def test_the_stage_walks_a_walk_with_the_robots_steps_and_validation_passes_what_it_should(op3, tmp_path, retargeted):
     qpos = S.walk(op3, steps=6, step_period_s=1.0, fps=FPS, double_support=0.2)
-    result = make_feasible(_retargeted(op3, qpos), op3, FeasibilityConfig(gait=GaitConfig(enabled=True)))
+    result = make_feasible(retargeted(op3, qpos), op3, FeasibilityConfig(gait=GaitConfig(enabled=True)))
     record = result.record["gait"]
     assert record["steps"] >= 6 and record["time_warp"] == 1.0
     lead = int(round(record["lead_in_s"] * FPS))
@@ -129,9 +121,9 @@ def test_the_stage_walks_a_walk_with_the_robots_steps_and_validation_passes_what
         assert report["checks"][check]["passed"], (check, report["checks"][check]["value"])
 
 
-def test_tracking_is_judged_against_what_the_servos_were_commanded(op3, tmp_path):
+def test_tracking_is_judged_against_what_the_servos_were_commanded(op3, tmp_path, retargeted):
     walk = S.walk(op3, steps=2, step_period_s=3.2, fps=FPS)
-    result = make_feasible(_retargeted(op3, walk), op3, FeasibilityConfig())
+    result = make_feasible(retargeted(op3, walk), op3, FeasibilityConfig())
     path = write_feasible(result, tmp_path / "a", op3.name)
     honest = validate_file(path, op3, plots=False).report["metrics"]["tracking_rmse_rad"]
     # the same execution, claimed to follow a task with the knees bent 0.3 rad more
