@@ -235,4 +235,7 @@ def read_robot_npz(path: str | Path) -> RobotTrajectory:
         value = getattr(out, name)
         if value is not None and value.shape != out.qpos.shape:
             raise InputError(f"{path}: field '{name}' has shape {value.shape}, 'qpos' {out.qpos.shape}")
+    if not (np.isfinite(out.retime_factor) and out.retime_factor > 0):
+        raise InputError(f"{path}: field 'retime_factor' must be a positive number (times slower than the source), "
+                         f"got {out.retime_factor!r}")
     return out

@@ -64,6 +64,12 @@ def test_retime_factor_round_trips_through_robot_npz(tmp_path):
     del data["retime_factor"]
     np.savez(tmp_path / "old.npz", **data)
     assert read_robot_npz(tmp_path / "old.npz").retime_factor == 1.0
+    # a factor that is not a positive number is named, not carried on
+    for bad in (0.0, -1.0, float("nan")):
+        data["retime_factor"] = np.float64(bad)
+        np.savez(tmp_path / "bad.npz", **data)
+        with pytest.raises(InputError, match="field 'retime_factor' must be a positive number"):
+            read_robot_npz(tmp_path / "bad.npz")
 
 
 @pytest.fixture(scope="module")

@@ -373,3 +373,27 @@ def test_planted_foot_next_to_a_fast_swing_does_not_skate():
     assert distance[0] == 0.0
     assert skating[:, 1].all()
     assert distance[1] == pytest.approx(0.09)
+
+
+def test_a_motion_played_much_slower_than_its_source_fails_time_warp(tiny, tmp_path):
+    qpos = S.standing(tiny, 1.0, FPS)
+    config = ValidationConfig()
+    for factor, passes in ((1.0, True), (config.max_time_warp, True), (config.max_time_warp * 1.5, False)):
+        trajectory = RobotTrajectory(qpos, FPS, tiny.joint_names, tiny.name, source="slow.npz", retime_factor=factor)
+        path = tmp_path / f"slow_{factor}.npz"
+        save_robot_npz(path, trajectory)
+        report = validate_file(path, tiny, physics=False, plots=False).report
+        assert report["checks"]["time_warp"]["passed"] is passes
+        assert report["metrics"]["time_warp"] == pytest.approx(factor)
+        assert ("time_warp" in report["failed_checks"]) is (not passes)
+
+
+@pytest.mark.parametrize("bad", [0.0, -2.0, float("nan"), float("inf")])
+def test_a_retime_factor_that_is_not_a_positive_number_is_named(tiny, tmp_path, bad):
+    path = tmp_path / "bad.npz"
+    save_robot_npz(path, RobotTrajectory(S.standing(tiny, 1.0, FPS), FPS, tiny.joint_names, tiny.name))
+    data = dict(np.load(path))
+    data["retime_factor"] = np.float64(bad)
+    np.savez(path, **data)
+    with pytest.raises(InputError, match="field 'retime_factor' must be a positive number"):
+        load_robot_npz(path, tiny)

@@ -114,6 +114,12 @@ class ValidationConfig:
     #: fidelity: fail when the root heading differs from the reference's by more than this (rad;
     #: 0.5 rad = 29 degrees, a turn of the robot the motion did not ask for)
     max_heading_error_rad: float = 0.5
+    #: fidelity: fail when the robot plays the motion more than this many times slower than the
+    #: source (robot.npz ``retime_factor``: retargeting's ``--retime``, the pipeline's slow-down,
+    #: the feasibility stage's time warp).  3.0 is the feasibility stage's own bound
+    #: (``GaitConfig.max_time_warp``), 1.6x the Froude time scale of a 0.5 m robot copying a
+    #: 1.7 m person (sqrt(1.7 / 0.5) = 1.8): slower than that is a different motion.
+    max_time_warp: float = 3.0
     #: centre of pressure sampling rate in the rollout (Hz); contact forces are read there.
     #: 20 Hz = the frame rate of the trajectories.
     cop_rate_hz: float = 20.0

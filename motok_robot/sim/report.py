@@ -27,6 +27,7 @@ Schema (``"schema": "motok-robot/validation-report/1"``)::
         "zmp_outside_ratio": float,          # support frames with the ZMP outside / support frames
         "zmp_max_excursion_m": float,        # farthest ZMP outside the support polygon (m, >= 0)
         "unsupported_force_max_n": float,    # largest base force the feet cannot supply (N)
+        "time_warp": float,                  # times slower than the source motion (retime_factor)
         "fell": bool|null, "fall_time_s": float|null,
         "tracking_rmse_rad": float|null,     # RMS joint tracking error before any fall
         "base_drift_m": float|null,          # max horizontal root distance sim vs reference
@@ -55,8 +56,8 @@ Schema (``"schema": "motok-robot/validation-report/1"``)::
 
 Check names: ``foot_skate_ratio``, ``foot_skate_distance``, ``penetration``, ``floating``,
 ``self_collision``, ``joint_limits``, ``joint_velocity``, ``joint_acceleration``, ``base_continuity``, ``torque``,
-``static_balance``, ``zmp``, and with physics ``fall``, ``tracking``, ``base_drift``,
-``center_of_pressure``.  A check whose value cannot be measured (e.g. no quasi-static
+``static_balance``, ``zmp``, ``time_warp``, and with physics ``fall``, ``tracking``, ``base_drift``,
+``center_of_pressure``, ``fidelity_pose``, ``fidelity_heading``.  A check whose value cannot be measured (e.g. no quasi-static
 contact frame for static balance) passes with ``value: null`` and says why in ``details``.
 """
 
@@ -132,8 +133,11 @@ def _frames(mask: np.ndarray) -> list[int]:
 
 def build_checks(index: RobotIndex, kin: KinematicResult, roll: RolloutResult | None,
                  config: ValidationConfig, planned_contacts: np.ndarray | None = None,
-                 fidelity: dict | None = None) -> tuple[list[Check], dict, dict, dict]:
+                 fidelity: dict | None = None, time_warp: float = 1.0) -> tuple[list[Check], dict, dict, dict]:
     """All checks, the metrics dict, the per-foot and the per-joint summaries.
+
+    ``time_warp``: how many times slower than its source the trajectory plays (robot.npz
+    ``retime_factor``), judged by the ``time_warp`` check.
 
     ``fidelity`` (:func:`motok_robot.sim.fidelity.fidelity_measures` of the rollout) adds the
     ``fidelity_pose`` and ``fidelity_heading`` checks.
@@ -243,6 +247,11 @@ def build_checks(index: RobotIndex, kin: KinematicResult, roll: RolloutResult | 
                          f"than {c.zmp_tolerance_m} m", _frames(outside),
                          {"max_excursion_m": excursion, "support_frames": int(support.sum()), "model": c.zmp_model}))
 
+    warp = float(time_warp)
+    checks.append(_upper("time_warp", warp, c.max_time_warp, "x",
+                         "how many times slower than the source motion the robot plays it (robot.npz retime_factor; "
+                         "a property of the whole clip, so no frames are listed)", []))
+
     metrics = {
         "foot_skate_ratio": float(skate_ratio.max()), "foot_skate_distance_m": float(kin.skate_distance.max()),
         "max_penetration_m": penetration, "max_float_m": max_float,
@@ -251,7 +260,7 @@ def build_checks(index: RobotIndex, kin: KinematicResult, roll: RolloutResult | 
         "max_base_rotation_step_deg": max_step,
         "max_torque_ratio": float(torque_ratio.max()), "balance_margin_min_m": margin_qs,
         "balance_margin_min_all_m": margin_all, "zmp_outside_ratio": zmp_ratio, "zmp_max_excursion_m": excursion,
-        "unsupported_force_max_n": float(kin.unsupported_force.max()),
+        "unsupported_force_max_n": float(kin.unsupported_force.max()), "time_warp": warp,
         "fell": None, "fall_time_s": None, "tracking_rmse_rad": None, "base_drift_m": None, "cop_outside_ratio": None,
     }
 

@@ -33,6 +33,8 @@ class RobotTrajectory:
     initial_qvel: float64 [nv] the start velocity of that execution, or None.
     task_qpos:   float64 [T, nq] what the servos were commanded to follow in that execution (the
                  reference with the feasibility stage's changes), or None.
+    retime_factor: how many times slower than its source motion the trajectory plays (1.0 when
+                 the file has no such field); validation's ``time_warp`` check judges it.
     """
 
     qpos: np.ndarray
@@ -44,6 +46,7 @@ class RobotTrajectory:
     reference_qpos: np.ndarray | None = None
     initial_qvel: np.ndarray | None = None
     task_qpos: np.ndarray | None = None
+    retime_factor: float = 1.0
 
     @property
     def num_frames(self) -> int:
@@ -102,9 +105,14 @@ def load_robot_npz(path: str | Path, robot=None) -> RobotTrajectory:
         if initial_qvel.ndim != 1 or initial_qvel.dtype.kind not in "fi" or not np.isfinite(initial_qvel).all():
             raise InputError(f"{path}: field 'initial_qvel' must be a finite number vector [nv], got {initial_qvel.dtype} {initial_qvel.shape}")
         initial_qvel = initial_qvel.astype(np.float64)
+    retime_factor = scalar_field(fields, "retime_factor", path) if "retime_factor" in fields else 1.0
+    if not (np.isfinite(retime_factor) and retime_factor > 0):
+        raise InputError(f"{path}: field 'retime_factor' must be a positive number (times slower than the source), "
+                         f"got {retime_factor!r}")
     trajectory = RobotTrajectory(qpos=qpos, fps=fps, joint_names=names, robot=robot_name,
                                  contacts=contacts, source=str(path), reference_qpos=like_qpos.get("reference_qpos"),
-                                 initial_qvel=initial_qvel, task_qpos=like_qpos.get("task_qpos"))
+                                 initial_qvel=initial_qvel, task_qpos=like_qpos.get("task_qpos"),
+                                 retime_factor=float(retime_factor))
     if robot is not None:
         check_matches_robot(trajectory, robot, where=str(path))
     return trajectory
@@ -160,4 +168,6 @@ def save_robot_npz(path: str | Path, trajectory: RobotTrajectory) -> None:
             "joint_names": np.array(trajectory.joint_names, dtype=str), "robot": np.array(trajectory.robot)}
     if trajectory.contacts is not None:
         data["contacts"] = trajectory.contacts.astype(bool)
+    if trajectory.retime_factor != 1.0:
+        data["retime_factor"] = np.float64(trajectory.retime_factor)
     np.savez(path, **data)

@@ -108,7 +108,8 @@ def validate_trajectory(trajectory: RobotTrajectory, robot, config: ValidationCo
                         track_qpos=trajectory.task_qpos)
         fidelity = fidelity_measures(index, roll.qpos, judge, roll.valid_frames)
         timing["physics"] = time.perf_counter() - start
-    checks, metrics, per_foot, per_joint = build_checks(index, kin, roll, config, trajectory.contacts, fidelity)
+    checks, metrics, per_foot, per_joint = build_checks(index, kin, roll, config, trajectory.contacts, fidelity,
+                                                         getattr(trajectory, "retime_factor", 1.0))
     report = {
         "schema": SCHEMA, "version": __version__, "passed": metrics["passed"],
         "failed_checks": [c.name for c in checks if not c.passed], "robot": index.name,
