@@ -124,6 +124,22 @@ def test_refinement_improves_a_deliberately_infeasible_reference(op3):
     assert not result.fell
     again, _ = execute(op3, qpos[0], result.goals, FPS, None)
     assert np.array_equal(again, result.executed_qpos)  # the refined goals replay what was planned
+    assert result.kept == "refined" and result.record()["kept"] == "refined"
+
+
+def test_refinement_keeps_the_warm_start_when_its_greedy_search_ends_costlier(op3):
+    # a feasible walk, searched with a horizon as short as the re-plan interval and large noise:
+    # each step's choice looks cheapest for 0.1 s and the robot falls; the warm start does not
+    qpos = S.walk(op3, steps=2, step_period_s=1.0, fps=FPS)
+    goals = validate_trajectory(RobotTrajectory(qpos, FPS, op3.joint_names, op3.name), op3, plots=False,
+                                balance=BalanceConfig(enabled=False)).goals.copy()
+    result = refine_goals(op3, qpos, FPS, goals, None,
+                          RefineConfig(samples=4, seed=0, noise_rad=0.3, max_offset_rad=1.5, horizon_s=0.1))
+    assert result.cost_searched > 100 * result.cost_start
+    assert result.kept == "warm start" and result.cost == result.cost_start and not result.fell
+    assert np.array_equal(result.goals, goals) and not result.offsets.any()
+    again, _ = execute(op3, qpos[0], goals, FPS, None)
+    assert np.array_equal(again, result.executed_qpos)
 
 
 def test_an_executed_trajectory_validates_against_its_reference(op3, tmp_path, retargeted):

@@ -15,6 +15,11 @@ executed on the main rollout; the goal frames that execution used are frozen.  A
 every frame is frozen, so a rollout of the returned goals from the start (validation's)
 reproduces the executed motion exactly (same physics, same controller, same ticks).
 
+The search is greedy over a short horizon, so its plan can end costlier over the whole clip
+than the warm start (on the robot's own walk of ``cmu_02_01`` it falls where the warm start
+does not).  The warm start is rolled out over the same ticks; when it costs less, it is
+returned unchanged and the record says ``"kept": "warm start"``.
+
 Cost per tick, relative to the reference at that time (lengths divided by the robot's height):
 torso attitude, base height, base position, sole positions (contact and foot placement),
 joint angles, offset size, and a fixed cost per second fallen.
@@ -71,11 +76,14 @@ class RefineResult:
     rollouts: int                     # candidate rollouts simulated
     wall_s: float
     config: RefineConfig = field(default_factory=RefineConfig)
+    kept: str = "refined"             # "refined", or "warm start" when the search ended costlier
+    cost_searched: float = float("nan")  # total cost of the searched plan, kept or not
 
     def record(self) -> dict:
         """What the stage changed, for report.json and summary.md."""
         moved = np.abs(self.offsets)
-        return {"method": "predictive sampling", "fell": self.fell, "cost": self.cost, "cost_warm_start": self.cost_start,
+        return {"method": "predictive sampling", "kept": self.kept, "fell": self.fell, "cost": self.cost,
+                "cost_searched": self.cost_searched, "cost_warm_start": self.cost_start,
                 "planning_steps": self.planning_steps, "rollouts": self.rollouts, "wall_s": self.wall_s,
                 "offset_rad_mean": float(moved.mean()), "offset_rad_max": float(moved.max()),
                 "config": self.config.to_dict()}
@@ -198,12 +206,17 @@ def refine_goals(index, qpos: np.ndarray, fps: float, goals: np.ndarray, plan: B
         if progress is not None:
             progress(tick0 * physics.tick_s, nticks * physics.tick_s)
     frozen_goals[~frozen] = goals[~frozen]
-    # the warm start's own cost on the same horizon, for the record
+    # the warm start's own cost over the same ticks: the search is greedy over a short horizon,
+    # so its plan can end worse than where it started; then the warm start is kept
     warm = physics.new_datas(initial[None])
     warm_cost = _Cost(index, ref, config, physics.tick_s, index.height_m, 1)
     physics.advance(warm, goals[None], fps, 0, nticks,
                     BalanceController(plan, index.joint_range) if plan is not None else None, on_tick=warm_cost)
-    executed, _ = execute(index, qpos[0], frozen_goals, fps, plan, timestep_s, qvel0)
-    return RefineResult(goals=frozen_goals, offsets=frozen_goals - goals, executed_qpos=executed,
-                        fell=bool(main_cost.fallen[0]), cost=float(main_cost.total[0]), cost_start=float(warm_cost.total[0]),
-                        planning_steps=steps, rollouts=rollouts, wall_s=time.perf_counter() - start, config=config)
+    kept = "refined" if main_cost.total[0] <= warm_cost.total[0] else "warm start"
+    chosen = frozen_goals if kept == "refined" else goals
+    executed, fall_frame = execute(index, qpos[0], chosen, fps, plan, timestep_s, qvel0)
+    chosen_cost = main_cost if kept == "refined" else warm_cost
+    return RefineResult(goals=chosen, offsets=chosen - goals, executed_qpos=executed,
+                        fell=bool(chosen_cost.fallen[0]), cost=float(chosen_cost.total[0]), cost_start=float(warm_cost.total[0]),
+                        planning_steps=steps, rollouts=rollouts, wall_s=time.perf_counter() - start, config=config,
+                        kept=kept, cost_searched=float(main_cost.total[0]))
