@@ -12,6 +12,7 @@ Neither is tried when the feasibility stage ran (it owns timing and balance).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 from motok_robot.pipeline.config import PipelineConfig
@@ -46,14 +47,21 @@ def balance_retargeter(entry: dict, weight: float,
     return cache[key]
 
 
-def rebalance(retargeter, config: PipelineConfig, motion, robot_path: Path, first, unbalanced: set, validation,
-              validate_robot_file, notes: list[str]):
-    """Retarget ``motion`` again with ``retargeter`` (:func:`balance_retargeter`: the ZMP term at
-    ``config.balance_zmp_weight``, a foot planted in every frame) and validate it.  Keeps the new
-    trajectory in ``robot_path`` and returns ``(retarget result, trajectory, validation)`` when
-    the checks it fails, speed checks aside, are a strict subset of those that failed before and
-    no more of its solver windows end with a hard constraint violated than in ``first`` (the
-    first retargeting result; a window that stopped short of optimality with every constraint
+def violated_windows(windows) -> int:
+    """How many solver windows ended with a hard constraint violated: ``windows`` are a retarget
+    result's windows (``.violated``) or robot.npz ``solver_status`` entries (``"violated"``)."""
+    return sum((w.get("violated") if isinstance(w, dict) else w.violated) is not None for w in windows)
+
+
+def rebalance(retargeter, config: PipelineConfig, motion, robot_path: Path, first_violated: int, unbalanced: set,
+              validation, validate_robot_file, notes: list[str]):
+    """Retarget ``motion`` (``.joints``, ``.fps``) again with ``retargeter``
+    (:func:`balance_retargeter`: the ZMP term at ``config.balance_zmp_weight``, a foot planted in
+    every frame) and validate it.  Keeps the new trajectory in ``robot_path`` and returns
+    ``(retarget result, trajectory, validation)`` when the checks it fails, speed checks aside,
+    are a strict subset of those that failed before and no more of its solver windows end with a
+    hard constraint violated than ``first_violated`` (the first retargeting's count,
+    :func:`violated_windows`; a window that stopped short of optimality with every constraint
     holding counts as feasible: validation judges it); otherwise restores the first trajectory
     and returns None."""
     from retarget.io import write_robot_npz
@@ -67,7 +75,7 @@ def rebalance(retargeter, config: PipelineConfig, motion, robot_path: Path, firs
     trajectory, balanced = validate_robot_file()
     after = set(balanced.report["failed_checks"])
     listed = ", ".join(sorted(unbalanced))
-    infeasible = sum(w.violated is not None for w in rt.windows) - sum(w.violated is not None for w in first.windows)
+    infeasible = violated_windows(rt.windows) - int(first_violated)
     if infeasible > 0:
         robot_path.write_bytes(original_bytes)
         notes.append(f"balance: {listed} failed; retargeting again with the ZMP term ({weights}) left "
@@ -113,3 +121,54 @@ def slow_down(limit: float, robot_path: Path, too_fast: set, validation, traject
                  f"{', '.join(sorted(too_fast))} within the servo limits without failing another check, "
                  "so the original timing is kept")
     return trajectory, validation, 1.0
+
+
+@dataclass
+class Repaired:
+    """What :func:`apply_repairs` kept."""
+
+    trajectory: object          # the validated trajectory (motok_robot.sim.trajectory.RobotTrajectory)
+    validation: object          # its ValidationResult
+    retime_factor: float        # 1.0 unless the slow-down was kept
+    zmp_weight: float           # retargeting's ZMP weight of the trajectory kept
+    acceleration_weight: float  # and its joint-acceleration weight
+    retarget: object | None     # the balance repair's retarget result when it was kept, else None
+
+
+def apply_repairs(config: PipelineConfig, retargeter_for_balance, motion, robot_path: Path, zmp_weight: float,
+                  acceleration_weight: float, first_violated: int, trajectory, validation, validate_robot_file,
+                  notes: list[str], stage=None, timings: dict | None = None) -> Repaired:
+    """The repairs ``run`` tries after validating ``robot_path`` (the same code serves
+    ``motok-robot repair``, so the stages run one by one give what ``run`` gives): the balance
+    repair when a footing or balance check failed and the trajectory was retargeted without the
+    ZMP term (``zmp_weight`` 0), then the slow-down when a speed check fails.
+    ``retargeter_for_balance()`` builds the balance repair's retargeter when needed
+    (:func:`balance_retargeter`); ``stage(name)`` names the running repair and ``timings``
+    receives ``balance`` / ``retime`` seconds.  ``robot_path`` holds the trajectory kept."""
+    import time
+
+    timings = timings if timings is not None else {}
+    retarget = None
+    unbalanced = BALANCE_CHECKS.intersection(validation.report["failed_checks"])
+    if unbalanced and config.balance_zmp_weight > 0 and zmp_weight == 0:
+        if stage is not None:
+            stage("balance")
+        t = time.perf_counter()
+        rebalanced = rebalance(retargeter_for_balance(), config, motion, robot_path, first_violated, unbalanced,
+                               validation, validate_robot_file, notes)
+        if rebalanced is not None:
+            retarget, trajectory, validation = rebalanced
+            zmp_weight = config.balance_zmp_weight
+            acceleration_weight = config.balance_acceleration_weight
+        timings["balance"] = time.perf_counter() - t
+    retime_factor = 1.0
+    too_fast = SPEED_CHECKS.intersection(validation.report["failed_checks"])
+    if too_fast and config.max_retime > 1.0:
+        if stage is not None:
+            stage("retime")
+        t = time.perf_counter()
+        trajectory, validation, retime_factor = slow_down(config.max_retime, robot_path, too_fast, validation,
+                                                           trajectory, validate_robot_file, notes)
+        timings["retime"] = time.perf_counter() - t
+    return Repaired(trajectory=trajectory, validation=validation, retime_factor=float(retime_factor),
+                    zmp_weight=float(zmp_weight), acceleration_weight=float(acceleration_weight), retarget=retarget)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from motok_robot.errors import InputError
 from motok_robot.pipeline.playback import play
-from motok_robot.pipeline.repairs import BALANCE_CHECKS, SPEED_CHECKS, rebalance, slow_down
+from motok_robot.pipeline.repairs import apply_repairs, violated_windows
 from motok_robot.pipeline.request import DEFAULT_CONSTRAINED_SECONDS
 from motok_robot.pipeline.result import PipelineResult
 from motok_robot.pipeline.source import load_source_motion
@@ -90,29 +90,16 @@ def run_stages(pipe, req, entry, tmp: Path, timings, bar, state, constraints, co
 
     trajectory, validation = validate_robot_file()
     timings["validate"] = time.perf_counter() - t
-    unbalanced = BALANCE_CHECKS.intersection(validation.report["failed_checks"])
-    if servo_goals is not None:
-        unbalanced = set()  # the feasibility stage owns balance and timing
-    if unbalanced and cfg.balance_zmp_weight > 0 and zmp_weight == 0:
-        stage("balance")
-        t = time.perf_counter()
-        rebalanced = rebalance(pipe._balance_retargeter(entry), cfg, motion, files["robot"], rt, unbalanced,
-                               validation, validate_robot_file, notes)
-        if rebalanced is not None:
-            rt, trajectory, validation = rebalanced
-            zmp_weight = cfg.balance_zmp_weight
-            acceleration_weight = cfg.balance_acceleration_weight
-        timings["balance"] = time.perf_counter() - t
+    if servo_goals is None:  # the balance repair and the slow-down (the feasibility stage owns both when it ran)
+        repaired = apply_repairs(cfg, lambda: pipe._balance_retargeter(entry), motion, files["robot"], zmp_weight,
+                                 acceleration_weight, violated_windows(rt.windows), trajectory, validation,
+                                 validate_robot_file, notes, stage=stage, timings=timings)
+        trajectory, validation, retime_factor = repaired.trajectory, repaired.validation, repaired.retime_factor
+        zmp_weight, acceleration_weight = repaired.zmp_weight, repaired.acceleration_weight
+        rt = repaired.retarget if repaired.retarget is not None else rt
+    else:  # how many times slower than the human the robot plays it (the feasibility stage's time warp)
+        retime_factor = json.loads(files["feasibility"].read_text())["time_warp"]
     notes[:0] = retargeting_notes(rt)
-    # how many times slower than the human the robot plays it (the feasibility stage's time warp)
-    retime_factor = json.loads(files["feasibility"].read_text())["time_warp"] if servo_goals is not None else 1.0
-    too_fast = SPEED_CHECKS.intersection(validation.report["failed_checks"])
-    if too_fast and cfg.max_retime > 1.0 and servo_goals is None:
-        stage("retime")
-        t = time.perf_counter()
-        trajectory, validation, retime_factor = slow_down(cfg.max_retime, files["robot"], too_fast, validation,
-                                                           trajectory, validate_robot_file, notes)
-        timings["retime"] = time.perf_counter() - t
     report = validation.report
     report["outputs"] = {"report": "report.json", "plots": [], "video": None}
     check = getattr(motion, "vocabulary", None)
