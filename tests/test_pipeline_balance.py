@@ -263,3 +263,13 @@ def test_a_real_walk_that_falls_is_rebalanced_and_passes(shared_datasets, tmp_pa
     assert result.passed, (result.failed_checks, result.notes)
     assert result.zmp_weight == PipelineConfig.balance_zmp_weight
     assert any(n.startswith("balance:") and "fall" in n for n in result.notes)
+    # the stages one by one: retarget, then repair (run's repairs as a stage of their own)
+    from motok_robot.cli import main
+
+    robot = tmp_path / "stages" / "robot.npz"
+    robot.parent.mkdir()
+    assert main(["retarget", str(motion), "--robot", "op3_like", "--out", str(robot)]) == 0
+    assert np.array_equal(read_robot_npz(robot).qpos, read_robot_npz(plain.files["robot"]).qpos)
+    assert main(["repair", str(robot), "--motion", str(motion), "--out", str(tmp_path / "repaired")]) == 0
+    assert np.array_equal(read_robot_npz(tmp_path / "repaired" / "robot.npz").qpos,
+                          read_robot_npz(result.files["robot"]).qpos)

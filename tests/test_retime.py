@@ -137,3 +137,44 @@ def test_task_qpos_round_trips_through_robot_npz_and_a_wrong_shape_is_named(tmp_
     np.savez(tmp_path / "bad.npz", **data)
     with pytest.raises(InputError, match="task_qpos"):
         read_robot_npz(tmp_path / "bad.npz")
+
+
+def test_the_stages_one_by_one_give_what_run_gives_for_a_motion_too_fast(fast_wave, tmp_path):
+    """retarget, then repair (run's slow-down as a stage of its own), on run's motion.npz: the same
+    robot.npz, verdict and servo goals as run."""
+    from motok_robot.cli import main
+    from motok_robot.pipeline import SPEED_CHECKS, Pipeline, PipelineConfig
+
+    ran = Pipeline(PipelineConfig(plots=False)).run(None, motion=fast_wave, out_dir=tmp_path / "run", render=False)
+    assert ran.retime_factor > 1.0  # run slowed it down
+    motion, robot = ran.files["motion"], tmp_path / "robot.npz"
+    assert main(["retarget", str(motion), "--robot", "op3_like", "--out", str(robot)]) == 0
+    rc = main(["repair", str(robot), "--motion", str(motion), "--out", str(tmp_path / "repaired")])
+    repaired = read_robot_npz(tmp_path / "repaired" / "robot.npz")
+    ran_robot = read_robot_npz(ran.files["robot"])
+    assert repaired.retime_factor == ran.retime_factor
+    assert np.array_equal(repaired.qpos, ran_robot.qpos)
+    report = json.loads((tmp_path / "repaired" / "report.json").read_text())
+    assert report["passed"] == ran.passed and report["failed_checks"] == ran.failed_checks
+    assert not SPEED_CHECKS.intersection(report["failed_checks"])
+    assert report["servo_goals"]["sha256"] == json.loads(ran.files["report"].read_text())["servo_goals"]["sha256"]
+    assert rc == (0 if ran.passed else 1)
+
+
+def test_repair_refuses_bad_input_with_one_line(tmp_path, capsys):
+    from motok_robot.cli import main
+
+    robot = tmp_path / "robot.npz"
+    write_robot_npz(robot, _trajectory())
+    cases = [(["--motion", str(tmp_path / "missing.npz")], "missing.npz"),
+             (["--motion", str(robot), "--max-retime", "0.5"], "--max-retime"),
+             (["--motion", str(robot), "--balance-zmp-weight", "nan"], "--balance-zmp-weight")]
+    for extra, named in cases:
+        assert main(["repair", str(robot), "--out", str(tmp_path / "out"), *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and named in err[0], err
+    data = dict(np.load(robot))
+    data["solver_status"] = np.array(json.dumps([1, 2]))
+    np.savez(tmp_path / "odd.npz", **data)
+    assert main(["repair", str(tmp_path / "odd.npz"), "--motion", str(robot), "--out", str(tmp_path / "out")]) == 2
+    assert "field 'solver_status'" in capsys.readouterr().err

@@ -96,6 +96,10 @@ def register(commands, groups) -> None:
         add_control_arguments(parser)
     parser.set_defaults(func=run_command)
 
+    from motok_robot.pipeline.repair_cli import register as register_repair  # light
+
+    register_repair(commands)  # run's repairs as a stage of their own
+
 
 def run_command(args: argparse.Namespace) -> int:
     import os
