@@ -1,3 +1,4 @@
+# Size (419 lines): one clip solve: contacts, scaling and the window loop share its state.
 """Retarget a whole clip: contact detection, scaling, then window after window of IPOPT.
 
 Windows: window ``k`` optimises frames ``[s_k, s_k + W)``; its first ``W - overlap`` frames are

@@ -1,3 +1,4 @@
+# Size (410 lines): one file format pair: the ASF skeleton, the AMC motion that needs it and the CMU map.
 """Acclaim ASF (skeleton) + AMC (motion) reader, forward kinematics and the CMU joint map.
 
 ASF fields used (any file in the format, not only CMU's):

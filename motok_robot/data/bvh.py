@@ -1,3 +1,4 @@
+# Size (403 lines): one file format: its grammar, forward kinematics and joint maps change together.
 """Biovision BVH reader, forward kinematics, and skeleton maps (Bandai Namco, acRNN, user).
 
 Parsing follows the BVH grammar: ``HIERARCHY`` with one ``ROOT`` and nested ``JOINT`` /

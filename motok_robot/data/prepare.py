@@ -1,3 +1,4 @@
+# Size (421 lines): one command's whole pipeline: import, features, split, write, and its summary table.
 """``motok-robot data prepare``: import sources, compute features, split, write the dataset.
 
 Output layout (docs/CONTRACTS.md, "Prepared dataset")::

@@ -1,3 +1,4 @@
+# Size (422 lines): every source kind's discovery and loading, so the kinds stay uniform.
 """Finding the clips of a data source (folder or ``.tar.xz`` / ``.zip`` archive) and loading them.
 
 A source is ``KIND=PATH``. :func:`iter_jobs` walks PATH (archives are streamed member by

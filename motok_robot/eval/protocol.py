@@ -1,3 +1,4 @@
+# Size (434 lines): one evaluation protocol: its inputs, metrics and repetitions, reviewed together.
 """The generation-evaluation protocol (HumanML3D style), independent of any model or CLI.
 
 Inputs:

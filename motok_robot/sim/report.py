@@ -1,3 +1,4 @@
+# Size (414 lines): the report schema (in the docstring) and every check that fills it, kept side by side.
 """The validation verdict and ``report.json``.
 
 Schema (``"schema": "motok-robot/validation-report/1"``)::
