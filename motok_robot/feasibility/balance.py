@@ -33,6 +33,7 @@ needs neither the reference trajectory nor MuJoCo to run the controller.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import mujoco
@@ -203,6 +204,18 @@ def build_plan(index, qpos: np.ndarray, fps: float, contacts: np.ndarray,
                        config=config)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of ``a`` [B, 3] and ``b`` [B, 3] or [3]: the arithmetic of
+    ``np.cross`` without its per-call axis handling (this runs every tick)."""
+    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    out = np.empty((a.shape[0], 3))
+    out[:, 0] = a1 * b2 - a2 * b1
+    out[:, 1] = a2 * b0 - a0 * b2
+    out[:, 2] = a0 * b1 - a1 * b0
+    return out
+
+
 class BalanceController:
     """The balance feedback of the module docstring, for a batch of ``batch`` robots.
 
@@ -235,12 +248,12 @@ class BalanceController:
 
     def _at(self, t: float):
         """Plan quantities at time ``t`` (linear between frames, held past the ends)."""
-        x = float(np.clip(t * self.plan.fps, 0.0, self.plan.num_frames - 1))
-        i = int(np.floor(x))
+        x = min(max(float(t) * self.plan.fps, 0.0), float(self.plan.num_frames - 1))
+        i = int(math.floor(x))
         k = min(i + 1, self.plan.num_frames - 1)
         f = x - i
         down = (1 - f) * self.plan.down[i] + f * self.plan.down[k]
-        down /= max(np.linalg.norm(down), 1e-9)
+        down /= max(math.sqrt(float(down @ down)), 1e-9)
         rate = (1 - f) * self.plan.rate[i] + f * self.plan.rate[k]
         tilt = (1 - f) * self.plan.tilt_matrix[i] + f * self.plan.tilt_matrix[k]
         damp = (1 - f) * self.plan.rate_matrix[i] + f * self.plan.rate_matrix[k]
@@ -256,19 +269,22 @@ class BalanceController:
         gyro = np.atleast_2d(np.asarray(gyro, dtype=np.float64))
         accel = np.atleast_2d(np.asarray(accel, dtype=np.float64))
         ok = np.isfinite(gyro).all(axis=1) & np.isfinite(accel).all(axis=1)
+        all_ok = bool(ok.all())  # the usual tick: no glitch to mask out
         cfg = self.config
         down_ref, rate_ref, tilt_m, rate_m = self._at(t)
-        g = np.where(ok[:, None], gyro, self.gyro)
+        g = gyro if all_ok else np.where(ok[:, None], gyro, self.gyro)
         self.gyro = self.gyro + cfg.gyro_filter * (g - self.gyro)
-        pred = self.down - self.dt * np.cross(self.gyro, self.down)
-        norm = np.linalg.norm(accel, axis=1, keepdims=True)
-        measured = np.where(ok[:, None] & (norm > 1e-6), -accel / np.maximum(norm, 1e-9), pred)
+        pred = self.down - self.dt * _cross(self.gyro, self.down)
+        norm = np.sqrt((accel * accel).sum(axis=1, keepdims=True))
+        use = norm > 1e-6 if all_ok else ok[:, None] & (norm > 1e-6)
+        measured = np.where(use, -accel / np.maximum(norm, 1e-9), pred)
         down = (1 - cfg.accel_weight) * pred + cfg.accel_weight * measured
-        self.down = down / np.maximum(np.linalg.norm(down, axis=1, keepdims=True), 1e-9)
-        tilt_err = np.cross(self.down, down_ref)          # [B, 3]
+        self.down = down / np.maximum(np.sqrt((down * down).sum(axis=1, keepdims=True)), 1e-9)
+        tilt_err = _cross(self.down, down_ref)            # [B, 3]
         rate_err = self.gyro - rate_ref                   # [B, 3]
         offset = tilt_err @ tilt_m.T + rate_err @ rate_m.T  # [B, nj]
-        offset = np.clip(offset, -cfg.max_offset_rad, cfg.max_offset_rad)
-        offset = np.where(ok[:, None], offset, self.last_offset)
+        offset = np.minimum(np.maximum(offset, -cfg.max_offset_rad), cfg.max_offset_rad)
+        if not all_ok:
+            offset = np.where(ok[:, None], offset, self.last_offset)
         self.last_offset = offset
-        return np.clip(goals + offset, self.low, self.high)
+        return np.minimum(np.maximum(goals + offset, self.low), self.high)
