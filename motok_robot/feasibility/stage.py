@@ -142,7 +142,6 @@ def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, pr
     fps = float(trajectory.fps)
     reference = np.asarray(trajectory.qpos, dtype=np.float64)
     t0 = time.perf_counter()
-    contacts = sole_contacts(index, reference, config.contact_height_m)
     walk = walk_task(trajectory, index, config, record) if config.gait.enabled else None
     task, plan_contacts = reference, None
     if walk is not None:  # the robot's own walk along the path (it may be slower and longer)
@@ -150,6 +149,7 @@ def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, pr
         reference = np.asarray(trajectory.qpos, dtype=np.float64)
         record["time_warp"] = float(trajectory.retime_factor)
     elif config.zmp_shift:
+        contacts = sole_contacts(index, reference, config.contact_height_m)
         shifted = shift_com(index, reference, fps, contacts, margin_m=config.zmp_margin_m, axes=config.zmp_axes)
         task = shifted.qpos
         record["zmp_shift"] = shifted.record()

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import hashlib
-import json
 import time
 import warnings
 from pathlib import Path
@@ -98,7 +97,7 @@ def run_stages(pipe, req, entry, tmp: Path, timings, bar, state, constraints, co
         zmp_weight, acceleration_weight = repaired.zmp_weight, repaired.acceleration_weight
         rt = repaired.retarget if repaired.retarget is not None else rt
     else:  # how many times slower than the human the robot plays it (the feasibility stage's time warp)
-        retime_factor = json.loads(files["feasibility"].read_text())["time_warp"]
+        retime_factor = trajectory.retime_factor
     notes[:0] = retargeting_notes(rt)
     report = validation.report
     report["outputs"] = {"report": "report.json", "plots": [], "video": None}
