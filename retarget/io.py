@@ -235,7 +235,14 @@ def read_robot_npz(path: str | Path) -> RobotTrajectory:
         value = getattr(out, name)
         if value is not None and value.shape != out.qpos.shape:
             raise InputError(f"{path}: field '{name}' has shape {value.shape}, 'qpos' {out.qpos.shape}")
-    if not (np.isfinite(out.retime_factor) and out.retime_factor > 0):
-        raise InputError(f"{path}: field 'retime_factor' must be a positive number (times slower than the source), "
-                         f"got {out.retime_factor!r}")
+    check_retime_factor(out.retime_factor, path)
     return out
+
+
+def check_retime_factor(value: float, where) -> float:
+    """``value`` (robot.npz ``retime_factor``) when it is a positive number; InputError naming
+    ``where`` (the file) and the field otherwise."""
+    if not (np.isfinite(value) and value > 0):
+        raise InputError(f"{where}: field 'retime_factor' must be a positive number (times slower than the source), "
+                         f"got {value!r}")
+    return float(value)

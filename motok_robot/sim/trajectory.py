@@ -15,6 +15,7 @@ import numpy as np
 from motok_robot.errors import InputError
 from motok_robot.limits import check_frames, check_joints, check_rate, check_seconds
 from motok_robot.npz_files import read_npz_fields, scalar_field
+from retarget.io import check_retime_factor  # light: numpy only
 
 
 @dataclass
@@ -105,14 +106,12 @@ def load_robot_npz(path: str | Path, robot=None) -> RobotTrajectory:
         if initial_qvel.ndim != 1 or initial_qvel.dtype.kind not in "fi" or not np.isfinite(initial_qvel).all():
             raise InputError(f"{path}: field 'initial_qvel' must be a finite number vector [nv], got {initial_qvel.dtype} {initial_qvel.shape}")
         initial_qvel = initial_qvel.astype(np.float64)
-    retime_factor = scalar_field(fields, "retime_factor", path) if "retime_factor" in fields else 1.0
-    if not (np.isfinite(retime_factor) and retime_factor > 0):
-        raise InputError(f"{path}: field 'retime_factor' must be a positive number (times slower than the source), "
-                         f"got {retime_factor!r}")
+    retime_factor = check_retime_factor(scalar_field(fields, "retime_factor", path), path) \
+        if "retime_factor" in fields else 1.0
     trajectory = RobotTrajectory(qpos=qpos, fps=fps, joint_names=names, robot=robot_name,
                                  contacts=contacts, source=str(path), reference_qpos=like_qpos.get("reference_qpos"),
                                  initial_qvel=initial_qvel, task_qpos=like_qpos.get("task_qpos"),
-                                 retime_factor=float(retime_factor))
+                                 retime_factor=retime_factor)
     if robot is not None:
         check_matches_robot(trajectory, robot, where=str(path))
     return trajectory
