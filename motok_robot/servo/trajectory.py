@@ -225,8 +225,6 @@ def _description_problem(report: dict, path: Path, robot_sha256: str) -> str | N
     return None
 
 
-
-
 def plan_targets(trajectory: Trajectory, start_ticks: np.ndarray, servo_map: ServoMap, rate_hz: float,
                  ramp_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Wanted servo positions for every control tick, before the safety limiter.
