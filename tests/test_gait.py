@@ -74,6 +74,50 @@ def test_footsteps_follow_the_path_within_the_step_limits(op3):
     assert near[single].max() < 1e-9
 
 
+def test_the_trailing_foot_carries_nothing_from_the_other_feet_landing_until_it_lifts(op3):
+    qpos = _gliding(op3, 4.0, 0.1, rest_s=1.0)
+    schedule = plan_steps(op3, qpos, FPS, first_step_frame=12, double_support=0.2)
+    contacts, loaded = schedule.contacts, schedule.loaded
+    assert not (loaded & ~contacts).any()  # only a foot on the floor carries weight
+    single = contacts.sum(axis=1) == 1
+    assert np.array_equal(loaded[single], contacts[single])
+    assert loaded[:12].all()  # standing before the first step: both feet
+    landings = [t for t in range(13, len(contacts)) if (contacts[t] & ~contacts[t - 1]).any()]
+    assert len(landings) >= 5
+    for t in landings:
+        landed = int(np.nonzero(contacts[t] & ~contacts[t - 1])[0][0])
+        u = t
+        while u < len(contacts) and contacts[u].all():  # the double support after the landing
+            u += 1
+        if u < len(contacts):  # another step follows (else both feet stand at the end, loaded)
+            assert all(loaded[v].tolist() == [landed == 0, landed == 1] for v in range(t, u)), t
+    # the ZMP reference is on the landed foot after the transfer share of each double support
+    zmp = zmp_reference(schedule, transfer_share=0.5)
+    centre = {(f.foot, f.start): f.centre for f in schedule.footholds}
+    for t in landings[:-1]:
+        landed = int(np.nonzero(contacts[t] & ~contacts[t - 1])[0][0])
+        assert np.allclose(zmp[t + 1], centre[(landed, t)])  # 2 frames of double support: on it at the second
+        assert not np.allclose(zmp_reference(schedule)[t + 1], centre[(landed, t)])  # share 1: still between
+
+
+def test_the_inverse_dynamics_gives_an_unloaded_foot_no_share_of_the_weight(op3):
+    from motok_robot.feasibility.dynamics import required_torque
+
+    qpos = np.tile(op3.nominal_qpos, (5, 1))
+    _, _, both = required_torque(op3, qpos, FPS)
+    loaded = np.ones((5, 2), dtype=bool)
+    loaded[:, 1] = False  # the right foot down, planned to carry nothing
+    _, _, left_only = required_torque(op3, qpos, FPS, loaded=loaded)
+    knee = [j for j, n in enumerate(op3.joint_names) if "knee" in n]
+    right_knee = [j for j in knee if op3.joint_names[j].startswith("r")][0]
+    left_knee = [j for j in knee if op3.joint_names[j].startswith("l")][0]
+    # the right knee holds only its shank and foot, the left knee the whole robot above it
+    assert abs(left_only[2, right_knee]) < 0.3 * abs(both[2, right_knee])
+    assert abs(left_only[2, left_knee]) > 1.5 * abs(both[2, left_knee])
+    with pytest.raises(ValueError, match="loaded"):
+        required_torque(op3, qpos, FPS, loaded=loaded[:3])
+
+
 def test_the_time_warp_slows_what_the_robot_cannot_step(op3):
     feet = RobotFeet(op3)
     robot_speed = 0.27 * feet.leg_length / 0.5
@@ -117,8 +161,10 @@ def test_the_stage_walks_a_walk_with_the_robots_steps_and_validation_passes_what
     assert not result.fell
     path = write_feasible(result, tmp_path, op3.name)
     report = validate_file(path, op3, plots=False).report
-    for check in ("fall", "tracking", "base_drift", "fidelity_pose", "fidelity_heading", "joint_velocity"):
-        assert report["checks"][check]["passed"], (check, report["checks"][check]["value"])
+    # every check, the feet's sliding included: with the trailing foot loaded in the feedforward
+    # until it lifts (two frames of double support, the ZMP moving across over all of it) this
+    # walk failed foot_skate_ratio (0.127) and foot_skate_distance (0.061 m)
+    assert report["passed"], {k: c["value"] for k, c in report["checks"].items() if not c["passed"]}
 
 
 def test_tracking_is_judged_against_what_the_servos_were_commanded(op3, tmp_path, retargeted):

@@ -147,9 +147,13 @@ class GaitConfig:
     #: replace the legs of a motion that travels by a walk planned for the robot along its path
     #: (False: the retargeted legs are tracked, with the ZMP shift)
     enabled: bool = False
-    #: one step every this many seconds, ``double_support`` of it on both feet
+    #: one step every this many seconds, ``double_support`` of it on both feet (at least one
+    #: frame; 0.1 = one frame at 20 fps): in physics the landed foot takes the load at
+    #: touchdown, and a trailing foot left on the floor unloaded is dragged along it
     step_period_s: float = 0.5
-    double_support: float = 0.2
+    double_support: float = 0.1
+    #: the ZMP reference reaches the landed foot after this share of each double support
+    zmp_transfer_share: float = 0.5
     #: the longest step (how far a foot lands ahead of the other), per leg length; 0.27 on
     #: op3_like = 6.8 cm, about half a foot length: the synthetic walk that stays up at 0.5 s a step
     advance_per_leg: float = 0.27
@@ -177,6 +181,7 @@ class GaitConfig:
 
     def __post_init__(self):
         _check_ranges("gait", self, (("step_period_s", 0.2, 2.0), ("double_support", 0.05, 0.8),
+                                     ("zmp_transfer_share", 0.1, 1.0),
                                      ("advance_per_leg", 0.02, 1.0), ("turn_per_step_rad", 0.0, 1.0),
                                      ("clearance_per_leg", 0.0, 0.5), ("vertical_share", 0.0, 0.45),
                                      ("zmp_outward_per_leg", 0.0, 0.2), ("lead_in_s", 0.0, 5.0),

@@ -164,17 +164,21 @@ def zmp_from_centroidal(com: np.ndarray, com_acc: np.ndarray, angmom_rate: np.nd
 
 
 def required_torque(index, qpos: np.ndarray, fps: float, contact_height_m: float = 0.005,
-                    friction: float = 0.8) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    friction: float = 0.8, loaded: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Joint angles, velocities and required torques [T, nj] of ``qpos`` [T, nq] at ``fps``:
     ``mj_inverse`` without constraints, the ground reaction distributed over the sole corners
     lower than ``contact_height_m`` (:class:`ContactDistributor`).  Validation's kinematic replay
-    measures the same torques with everything else it checks."""
+    measures the same torques with everything else it checks.  ``loaded`` [T, 2] (bool), when
+    given, also keeps a foot's corners out where it is False: a foot on the floor planned to
+    carry no weight (the feasibility stage's trailing foot after the other has landed)."""
     model = index.kin_model
     data = mujoco.MjData(model)
     qvel, qacc = qvel_qacc(model, qpos, fps)
     distributor = ContactDistributor(model, index.base_dof, friction)
     corner_bodies = index.sole_body[:, None].repeat(4, axis=1)
     torque = np.zeros((qpos.shape[0], index.nj))
+    if loaded is not None and np.shape(loaded) != (qpos.shape[0], 2):
+        raise ValueError(f"loaded has shape {np.shape(loaded)}, expected ({qpos.shape[0]}, 2)")
     for t in range(qpos.shape[0]):
         data.qpos[:] = qpos[t]
         data.qvel[:] = qvel[t]
@@ -182,6 +186,8 @@ def required_torque(index, qpos: np.ndarray, fps: float, contact_height_m: float
         mujoco.mj_inverse(model, data)
         corners = data.site_xpos[index.corner_sites]
         down = corners[:, :, 2].min(axis=1) < contact_height_m
+        if loaded is not None:
+            down &= loaded[t]
         qfrc_contact, _, _ = distributor.solve(data, data.qfrc_inverse, corners[down].reshape(-1, 3),
                                                corner_bodies[down].reshape(-1))
         torque[t] = (data.qfrc_inverse - qfrc_contact)[index.dof_adr]

@@ -19,6 +19,11 @@ with steps of its own:
 * **Swing.**  Up by ``clearance_per_leg`` x the leg length (a half sine), across (min-jerk)
   only between the first and last 15 % of the swing, so the foot leaves and meets the floor
   vertically.
+* **Which foot carries the robot.**  Support passes to a swing foot when it lands: in physics
+  the trailing foot's load falls from 0.95 to 0.13 of the robot's weight within 16 ms of the
+  touchdown.  So the trailing foot is planned unloaded from the other foot's landing until it
+  lifts (``StepSchedule.loaded``), and the inverse dynamics behind the feedforward goals gives
+  it no share of the weight there (docs/experiments/2026-12-02-load-at-touchdown.md).
 
 :func:`plan_steps` returns the schedule (foot poses and contacts per frame, the footholds);
 :mod:`.gait` turns it into a whole-body trajectory.
@@ -52,6 +57,8 @@ class StepSchedule:
     footholds: list        # [Foothold], in time order
     steps: int             # number of swings
     heading: np.ndarray    # [T] the smoothed reference heading the footholds turn with (rad)
+    loaded: np.ndarray     # [T, 2] bool: the feet planned to carry weight (down, and not a
+    #                        trailing foot between the other's landing and its own lift-off)
 
     def record(self) -> dict:
         return {"steps": self.steps, "double_support_fraction": float(np.mean(self.contacts.all(axis=1))),
@@ -193,9 +200,11 @@ def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, st
         pos, quat, centre = hold(k, place, heading_k)
         current.append([pos, quat, centre, heading_k, 0])  # pose, centre, yaw, start frame of the hold
     footholds = []
+    loaded = np.ones((T, 2), dtype=bool)
     swing = first_foot
     t0 = int(first_step_frame)
     steps = 0
+    landed = False  # whether the stance foot landed at t0 (else both feet stood before it)
     while t0 + period <= T - 1:
         land = t0 + period  # first frame of the next hold
         stance = 1 - swing
@@ -220,6 +229,8 @@ def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, st
         if moved:
             footholds.append(Foothold(swing, start0, t0 + ds - 1, p0, q0, current[swing][2]))
             p1, q1, c1 = hold(swing, goal, goal_yaw)
+            if landed:  # the lifting foot carries nothing once the other has landed
+                loaded[t0:t0 + ds, swing] = False
             lift_frames = range(t0 + ds, land)
             n = len(lift_frames)
             for i, t in enumerate(lift_frames):
@@ -232,6 +243,7 @@ def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, st
                 contacts[t, swing] = False
             current[swing] = [p1, q1, c1, goal_yaw, land]
             steps += 1
+        landed = moved
         swing = stance
         t0 = land
     for k in range(2):
@@ -241,7 +253,7 @@ def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, st
         foot_pos[f.start:f.end + 1, f.foot] = f.pos
         foot_quat[f.start:f.end + 1, f.foot] = f.quat
     return StepSchedule(contacts=contacts, foot_pos=foot_pos, foot_quat=foot_quat, footholds=footholds, steps=steps,
-                        heading=yaw)
+                        heading=yaw, loaded=loaded & contacts)
 
 
 def _beside(offsets: np.ndarray, stance: int, swing: int, stance_xy: np.ndarray, yaw: float) -> np.ndarray:

@@ -5,8 +5,9 @@ base height, roll and pitch to keep; the heading may be given smoothed), this bu
 robot's balance depends on, as a biped walking pattern generator does:
 
 1. **A ZMP reference that walks from foothold to foothold**: on the stance foot's sole centre in
-   single support, moving linearly across in double support, between the feet before the first
-   step and after the last.
+   single support, moving linearly across over the first ``zmp_transfer_share`` of each double
+   support (half: with one frame of double support it is on the landed foot at touchdown, where
+   physics puts the load), between the feet before the first step and after the last.
 2. **A CoM path for it**: the horizontal CoM minimising the cart-table ZMP error plus its jerk,
    a banded least-squares problem over the whole clip at ``rate_hz`` (the non-causal form of
    ZMP preview control), starting and ending at rest (:func:`com_path`).
@@ -111,8 +112,9 @@ def with_yaw(quat: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     return out
 
 
-def zmp_reference(schedule: StepSchedule) -> np.ndarray:
-    """[T, 2] the ZMP reference of ``schedule`` (see the module docstring, step 1)."""
+def zmp_reference(schedule: StepSchedule, transfer_share: float = 1.0) -> np.ndarray:
+    """[T, 2] the ZMP reference of ``schedule`` (see the module docstring, step 1): in each
+    double support it reaches the next support after ``transfer_share`` of it (1: at its end)."""
     contacts = schedule.contacts
     T = contacts.shape[0]
     centre = np.zeros((T, 2, 2))
@@ -131,7 +133,7 @@ def zmp_reference(schedule: StepSchedule) -> np.ndarray:
         before = None if t == 0 else (0 if contacts[t - 1, 0] else 1)
         after = None if u == T - 1 else (0 if contacts[u + 1, 0] else 1)
         for v in range(t, u + 1):
-            w = (v - t + 1) / (u - t + 2)
+            w = min(1.0, (v - t + 1) / ((u - t + 2) * transfer_share))
             mid = centre[v].mean(axis=0)
             start = mid if before is None else centre[v, before]
             end = mid if after is None else centre[v, after]
@@ -143,18 +145,19 @@ def zmp_reference(schedule: StepSchedule) -> np.ndarray:
 def generate_gait(index, qpos: np.ndarray, fps: float, schedule: StepSchedule, *, rate_hz: float = 100.0,
                   jerk_weight: float = 1e-7, passes: int = 6, reach_window_s: float = 0.1,
                   max_drop_fraction: float = 0.2, velocity_fraction: float = 0.9,
-                  base_yaw: np.ndarray | None = None) -> GaitResult:
+                  base_yaw: np.ndarray | None = None, zmp_transfer_share: float = 1.0) -> GaitResult:
     """The task trajectory [T, nq] walking ``schedule`` with the upper body, base height and
     orientation of reference ``qpos`` [T, nq] at ``fps`` (see the module docstring); with
     ``base_yaw`` [T] (rad) the base turns with it instead of the reference's (a human's pelvis
-    swings its heading with every step; on a robot's stance foot that swing is a twist)."""
+    swings its heading with every step; on a robot's stance foot that swing is a twist);
+    ``zmp_transfer_share``: see :func:`zmp_reference`."""
     qpos = np.asarray(qpos, dtype=np.float64).copy()
     if base_yaw is not None:
         qpos[:, 3:7] = with_yaw(qpos[:, 3:7], base_yaw)
     T = qpos.shape[0]
     foot_pos, foot_quat = schedule.foot_pos, schedule.foot_quat
     com = _com(index, qpos)
-    zmp = zmp_reference(schedule)
+    zmp = zmp_reference(schedule, zmp_transfer_share)
     # CoM path at rate_hz over the clip, sampled back at the frames
     n = max(4, int(round((T - 1) / fps * rate_hz)) + 1)
     times = np.linspace(0, (T - 1) / fps, n)

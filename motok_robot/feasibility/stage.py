@@ -96,8 +96,9 @@ def first_lifted_foot(contacts: np.ndarray) -> int:
 
 
 def walk_task(trajectory, index, config, record: dict):
-    """(trajectory, task qpos, planned contacts) of the robot's own walk along ``trajectory``'s
-    path (:mod:`.footsteps`, :mod:`.gait`), or None when the motion does not travel."""
+    """(trajectory, task qpos, planned contacts, feet planned to carry weight) of the robot's own
+    walk along ``trajectory``'s path (:mod:`.footsteps`, :mod:`.gait`), or None when the motion
+    does not travel."""
     from retarget.retime import hold_ends, retime
 
     gait = config.gait
@@ -121,10 +122,11 @@ def walk_task(trajectory, index, config, record: dict):
                           turn_per_step_rad=gait.turn_per_step_rad, clearance_per_leg=gait.clearance_per_leg,
                           first_foot=first_lifted_foot(contacts), feet=feet, offsets=offsets,
                           lift_share=gait.vertical_share, zmp_outward_per_leg=gait.zmp_outward_per_leg)
-    walk = generate_gait(index, reference, fps, schedule, base_yaw=schedule.heading)
+    walk = generate_gait(index, reference, fps, schedule, base_yaw=schedule.heading,
+                         zmp_transfer_share=gait.zmp_transfer_share)
     record["gait"] = {"time_warp": warp, "lead_in_s": before / fps, "lead_out_s": round(gait.lead_out_s * fps) / fps,
                       **schedule.record(), **walk.record()}
-    return trajectory, walk.qpos, walk.contacts
+    return trajectory, walk.qpos, walk.contacts, schedule.loaded
 
 
 def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, progress=None) -> FeasibleResult:
@@ -143,9 +145,9 @@ def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, pr
     reference = np.asarray(trajectory.qpos, dtype=np.float64)
     t0 = time.perf_counter()
     walk = walk_task(trajectory, index, config, record) if config.gait.enabled else None
-    task, plan_contacts = reference, None
+    task, plan_contacts, loaded = reference, None, None
     if walk is not None:  # the robot's own walk along the path (it may be slower and longer)
-        trajectory, task, plan_contacts = walk
+        trajectory, task, plan_contacts, loaded = walk
         reference = np.asarray(trajectory.qpos, dtype=np.float64)
         record["time_warp"] = float(trajectory.retime_factor)
     elif config.zmp_shift:
@@ -155,7 +157,8 @@ def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, pr
         record["zmp_shift"] = shifted.record()
     timing["task"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    joint_pos, joint_vel, torque = required_torque(index, task, fps, config.contact_height_m, config.friction)
+    joint_pos, joint_vel, torque = required_torque(index, task, fps, config.contact_height_m, config.friction,
+                                                   loaded=loaded)
     stiffness, damping = servo_gains(servo_model(index, config.timestep_s)[0], index)
     goals = feedforward_goals(index, joint_pos, joint_vel, torque, fps, stiffness, damping, config.goal_velocity_fraction)
     if plan_contacts is None:
