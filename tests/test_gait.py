@@ -210,6 +210,24 @@ def test_run_and_feasible_offer_the_own_steps_walk():
     with pytest.raises(InputError, match="--feasible-own-steps needs --feasible"):
         feasibility_config(parser.parse_args(["run", "a person walks", "--out", "o", "--feasible-own-steps"]))
     assert parser.parse_args(["feasible", "robot.npz", "--out", "o", "--own-steps"]).own_steps
+    from motok_robot.pipeline.cli import pipeline_config
+
+    assert pipeline_config(parser.parse_args(["run", "a person walks", "--out", "o"])).walk_own_steps
+    assert not pipeline_config(parser.parse_args(["run", "a person walks", "--out", "o", "--no-own-steps"])).walk_own_steps
+
+
+def test_run_walks_a_motion_that_travels_with_the_robots_own_steps(op3):
+    from types import SimpleNamespace
+
+    from motok_robot.pipeline import PipelineConfig
+    from motok_robot.pipeline.stages import walk_config
+
+    entry = {"index": op3}
+    walk = SimpleNamespace(qpos=S.walk(op3, steps=6, step_period_s=1.0, fps=FPS))
+    config = walk_config(PipelineConfig(), entry, walk)
+    assert config is not None and config.gait.enabled
+    assert walk_config(PipelineConfig(walk_own_steps=False), entry, walk) is None
+    assert walk_config(PipelineConfig(), entry, SimpleNamespace(qpos=S.standing(op3, 2.0, FPS))) is None
 
 
 @pytest.mark.slow

@@ -136,6 +136,9 @@ def test_run_writes_every_file_and_they_parse(full_run):
     # the robot plays the motion retime_factor times slower when the servos need it (retarget.retime)
     assert robot_npz.retime_factor == pytest.approx(result.retime_factor)
     frames = int(round((T - 1) * robot_npz.retime_factor)) + 1
+    if "feasibility" in result.files:  # walked with the robot's own steps: standing added before and after
+        gait = json.loads(result.files["feasibility"].read_text())["gait"]
+        frames += int(round(gait["lead_in_s"] * 20)) + int(round(gait["lead_out_s"] * 20))
     assert robot_npz.robot == "op3_like" and robot_npz.qpos.shape[0] == frames and np.isfinite(robot_npz.qpos).all()
     report = json.loads((out / "report.json").read_text())
     validate_report_dict(report)
@@ -380,7 +383,9 @@ def test_cli_run_prints_summary(runs, tmp_path, capsys):
     result = json.loads((out / "pipeline.json").read_text())
     assert code == (0 if result["passed"] else 1)
     assert printed.startswith("PASS" if result["passed"] else "FAIL")
-    assert re.search(r"generate \d+\.\d\d s \| retarget \d+\.\d\d s \| validate \d+\.\d\d s", printed)
+    # a walk goes through the feasibility stage (the robot's own steps) between the two
+    assert re.search(r"generate \d+\.\d\d s \| retarget \d+\.\d\d s \| (feasibility \d+\.\d\d s \| )?"
+                     r"validate \d+\.\d\d s", printed)
     assert "playback (dry-run): completed" in printed and str(out / "summary.md") in printed
 
 

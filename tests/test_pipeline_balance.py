@@ -240,8 +240,10 @@ CLIP = "dataset-1_walk_old_001.bvh"
 @pytest.mark.slow
 def test_a_real_walk_that_falls_is_rebalanced_and_passes(shared_datasets, tmp_path):
     """Bandai ``walk_old_001`` (first 6 s, put on the canonical body at 20 fps as ``run
-    --motion`` does) falls on op3_like when retargeted without the ZMP term; the default
-    pipeline re-solves it with the term and the robot then passes every check."""
+    --motion`` does) falls on op3_like when retargeted without the ZMP term; validated as
+    retargeted (``walk_own_steps=False``), the pipeline re-solves it with the term and the robot
+    then passes every check.  By default ``run`` walks it with the robot's own steps instead, and
+    ``feasible --own-steps`` on the retargeted file gives the same robot.npz."""
     from motok_robot.pipeline import load_source_motion
 
     archive = shared_datasets / "bandai-namco-bvh.tar.xz"
@@ -256,10 +258,11 @@ def test_a_real_walk_that_falls_is_rebalanced_and_passes(shared_datasets, tmp_pa
     source.joints, source.features = source.joints[:120], source.features[:120]
     motion = source.save(tmp_path / "walk.npz")
 
-    plain = Pipeline(plots=False, balance_zmp_weight=0.0).run(None, motion=motion, out_dir=tmp_path / "plain",
-                                                              render=False)
+    plain = Pipeline(plots=False, balance_zmp_weight=0.0, walk_own_steps=False).run(
+        None, motion=motion, out_dir=tmp_path / "plain", render=False)
     assert "fall" in plain.failed_checks and plain.zmp_weight == 0.0
-    result = Pipeline(plots=False).run(None, motion=motion, out_dir=tmp_path / "balanced", render=False)
+    result = Pipeline(plots=False, walk_own_steps=False).run(None, motion=motion, out_dir=tmp_path / "balanced",
+                                                             render=False)
     assert result.passed, (result.failed_checks, result.notes)
     assert result.zmp_weight == PipelineConfig.balance_zmp_weight
     assert any(n.startswith("balance:") and "fall" in n for n in result.notes)
@@ -273,3 +276,9 @@ def test_a_real_walk_that_falls_is_rebalanced_and_passes(shared_datasets, tmp_pa
     assert main(["repair", str(robot), "--motion", str(motion), "--out", str(tmp_path / "repaired")]) == 0
     assert np.array_equal(read_robot_npz(tmp_path / "repaired" / "robot.npz").qpos,
                           read_robot_npz(result.files["robot"]).qpos)
+    # the default: the robot's own steps (the feasibility stage), no repair
+    walked = Pipeline(plots=False).run(None, motion=motion, out_dir=tmp_path / "walked", render=False)
+    assert walked.files.get("feasibility") is not None and not any(n.startswith("balance:") for n in walked.notes)
+    assert any("steps of its own" in n for n in walked.notes)
+    assert main(["feasible", str(robot), "--own-steps", "--out", str(tmp_path / "own")]) == 0
+    assert np.array_equal(read_robot_npz(tmp_path / "own" / "robot.npz").qpos, read_robot_npz(walked.files["robot"]).qpos)

@@ -67,6 +67,9 @@ def register(commands, groups) -> None:
     parser.add_argument("--feasible-own-steps", action="store_true",
                         help="with --feasible: a motion that travels is walked with the robot's own steps along "
                              "its path, played slower where the robot cannot step as fast (docs/feasibility.md)")
+    parser.add_argument("--no-own-steps", action="store_true",
+                        help="without --feasible: validate a motion that travels as retargeted, with the repairs "
+                             "below (default: it is walked with the robot's own steps by the feasibility stage)")
     parser.add_argument("--max-retime", type=float, default=PipelineConfig.max_retime, metavar="S",
                         help="when the motion is too fast for the servos (the torque, joint_velocity or "
                         "joint_acceleration check fails), play it up to S times slower until those checks pass "
@@ -212,7 +215,8 @@ def pipeline_config(args: argparse.Namespace, plots: bool | None = None, sim_vid
                           sim_video=args.sim_video if sim_video is None else sim_video, max_retime=args.max_retime,
                           balance_zmp_weight=args.balance_zmp_weight,
                           balance_acceleration_weight=args.balance_acceleration_weight, retarget=balance_config(args),
-                          feasibility=feasibility_config(args))
+                          feasibility=feasibility_config(args),
+                          walk_own_steps=not getattr(args, "no_own_steps", False))
 
 
 def constraint_arguments(args: argparse.Namespace, seconds: float | None):

@@ -47,6 +47,13 @@ class PipelineConfig:
             and the balance repair and the slow-down are not tried (the stage owns timing and
             balance).  None (default): retargeting's trajectory is validated as it is, with the
             two repairs below.
+        walk_own_steps: with no ``feasibility`` given, a motion that travels (both feet cover
+            more than half a leg length and neither rises high:
+            :func:`motok_robot.feasibility.stage.walks`) goes through the feasibility stage with
+            the robot's own steps along its path (``GaitConfig(enabled=True)``) instead of the two
+            repairs: the human's stride topples a small humanoid, its own steps do not
+            (docs/feasibility.md).  Motions on the spot are validated as retargeted, with the
+            repairs.  False: every motion is validated as retargeted.
         balance_acceleration_weight: the joint-acceleration weight (``CostWeights.acceleration``)
             of that re-solve.  The ZMP term rewards CoM accelerations that move the ZMP under the
             foot, and with the plain weight (5) the optimiser gets them from frame-to-frame
@@ -70,3 +77,4 @@ class PipelineConfig:
     balance_zmp_weight: float = 1000.0
     balance_acceleration_weight: float = 50.0
     feasibility: object | None = None
+    walk_own_steps: bool = True

@@ -67,10 +67,11 @@ def run_stages(pipe, req, entry, tmp: Path, timings, bar, state, constraints, co
 
     cfg = pipe.config
     servo_goals = None
-    if cfg.feasibility is not None:  # 3a. feasibility -> the executed robot.npz, servo_goals.npz
+    feasibility = cfg.feasibility if cfg.feasibility is not None else walk_config(cfg, entry, rt)
+    if feasibility is not None:  # 3a. feasibility -> the executed robot.npz, servo_goals.npz
         stage("feasibility")
         t = time.perf_counter()
-        servo_goals = feasible(cfg.feasibility, entry, files, tmp, notes)
+        servo_goals = feasible(feasibility, entry, files, tmp, notes)
         timings["feasibility"] = time.perf_counter() - t
 
     # 3. validation -> report.json, plots, video.mp4
@@ -170,6 +171,20 @@ def generate(pipe, req, constraints, control, control_path):
                            seconds=req["seconds"] or DEFAULT_CONSTRAINED_SECONDS, seed=req["seed"],
                            planner=cfg.planner, tokenizer_run=cfg.tokenizer_run, planner_run=cfg.planner_run,
                            device=cfg.device, **opts)
+
+
+def walk_config(cfg, entry: dict, trajectory):
+    """The feasibility stage's settings for a run without ``--feasible``: the robot's own steps
+    when ``cfg.walk_own_steps`` and the retargeted ``trajectory`` travels, else None."""
+    if not cfg.walk_own_steps:
+        return None
+    from motok_robot.feasibility.config import FeasibilityConfig, GaitConfig
+    from motok_robot.feasibility.footsteps import RobotFeet
+    from motok_robot.feasibility.stage import walks
+
+    config = FeasibilityConfig(gait=GaitConfig(enabled=True))
+    index = entry["index"]
+    return config if walks(index, trajectory.qpos, RobotFeet(index), config.gait) else None
 
 
 def feasible(config, entry: dict, files: dict, tmp: Path, notes: list) -> dict:
