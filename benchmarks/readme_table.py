@@ -370,7 +370,7 @@ def table_robot(results: Path, shipped: dict[str, str]) -> str:
         rows.append((r["text"], r.get("seconds", "-"), "**yes**" if truthy(r.get("passed")) else "no",
                      ", ".join(failing(r)) or ("-" if truthy(r.get("passed")) else r.get("error") or "?"),
                      "yes" if r.get("balance_repair_kept") else "-",
-                     f"{float(slower):g}x" if slower not in (None, "") else "1x",
+                     f"{float(slower):.3g}x" if slower not in (None, "") else "1x",
                      _seconds(r, "retarget_s"), _seconds(r, "balance_s"), _seconds(r, "validate_s"), _seconds(r, "total_s")))
     return markdown(("prompt", "clip s", "passed", "failing checks", "balance repair kept", "played slower",
                      "retarget s", "balance s", "validate s", "total s"), rows, "lrlllrrrrr")
