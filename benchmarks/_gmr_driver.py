@@ -1,11 +1,9 @@
 """Run GMR (General Motion Retargeting) on one Bandai Namco BVH clip; for bench_gmr.py only.
 
-Runs with the **GMR virtual environment's** python (mujoco, mink, daqp, numpy, scipy), never
+Runs with the **GMR virtual environment's** python (mujoco, mink, daqp, numpy, scipy, rich), never
 the project's, and imports nothing from the project. It imports GMR's retargeting class from an
 extracted copy of its source (``--gmr-src``, the folder holding ``general_motion_retargeting/``)
-without running that package's ``__init__`` (which pulls in the viewer); GMR's modules do
-``from rich import print``, so a stand-in ``rich`` module with the built-in ``print`` is put in
-``sys.modules`` when ``rich`` is not installed. The leading underscore keeps ``bench_all.py``
+without running that package's ``__init__`` (which pulls in the viewer). The leading underscore keeps ``bench_all.py``
 from taking this helper for a benchmark.
 
 What it does, as GMR's own ``scripts/bvh_to_robot.py`` does for LAFAN1 files, minus the viewer:
@@ -55,7 +53,6 @@ LAFAN1-axes rotation of the same bone.
 from __future__ import annotations
 
 import argparse
-import builtins
 import json
 import os
 import sys
@@ -111,12 +108,6 @@ def import_gmr(src: Path):
     pkg = src / "general_motion_retargeting"
     if not pkg.is_dir():
         raise SystemExit(f"{pkg} not found (give --gmr-src, the folder holding general_motion_retargeting/)")
-    try:
-        import rich  # noqa: F401
-    except ImportError:
-        stub = types.ModuleType("rich")
-        stub.print = builtins.print
-        sys.modules["rich"] = stub
     for name, path in (("general_motion_retargeting", pkg), ("general_motion_retargeting.utils", pkg / "utils")):
         if name not in sys.modules:  # a bare package: skips __init__ (viewer, torch, smplx)
             mod = types.ModuleType(name)

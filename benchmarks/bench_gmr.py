@@ -38,7 +38,7 @@ per each method's own frames, turns also per second).
 Setup (once; GMR is never a dependency of the project)::
 
     python3 -m venv ../gmr_venv
-    ../gmr_venv/bin/pip install mujoco mink daqp numpy scipy loop_rate_limiters
+    ../gmr_venv/bin/pip install mujoco mink daqp numpy scipy loop_rate_limiters rich
 
 Usage::
 
@@ -83,7 +83,7 @@ DEFAULT_ROBOTS = ["g1", "t1", "toddlerbot"]
 GMR_NAMES = {"g1": "unitree_g1", "t1": "booster_t1", "toddlerbot": "stanford_toddy"}
 GMR_XML = {"g1": "assets/unitree_g1/g1_mocap_29dof.xml", "t1": "assets/booster_t1/t1_mocap.xml",
            "toddlerbot": "assets/stanford_toddy/toddy_mocap.xml"}
-SETUP = "python3 -m venv ../gmr_venv && ../gmr_venv/bin/pip install mujoco mink daqp numpy scipy loop_rate_limiters"
+SETUP = "python3 -m venv ../gmr_venv && ../gmr_venv/bin/pip install mujoco mink daqp numpy scipy loop_rate_limiters rich"
 
 # per robot and model: (feet bodies, keypoint joints as (human joint, joint name)); "ours" = models/mjcf
 _SIDES = ("left", "right")
@@ -393,7 +393,7 @@ def main(argv=None) -> int:
         say(f"bench_gmr: skipped: {BANDAI if not BANDAI.exists() else GMR_ARCHIVE} not found (../shared)")
         return 0
     gmr_python = Path(os.path.abspath(args.gmr_python))  # not resolved: a venv's python is a symlink
-    probe = subprocess.run([str(gmr_python), "-c", "import mink, daqp, mujoco, scipy"], capture_output=True, text=True) \
+    probe = subprocess.run([str(gmr_python), "-c", "import mink, daqp, mujoco, scipy, rich"], capture_output=True, text=True) \
         if gmr_python.exists() else None
     if probe is None or probe.returncode != 0:
         say(f"bench_gmr: skipped: no GMR environment at {gmr_python} (create it: {SETUP})")
