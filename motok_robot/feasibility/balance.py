@@ -27,8 +27,13 @@ support) is precomputed per frame into a :class:`BalancePlan`; at run time the c
 time-varying linear feedback plus the filter, cheap enough for a Python loop at 125 Hz and
 vectorised over a batch of rollouts (the physics refinement).
 
-The plan travels with the servo goals (``servo_goals.npz``, fields ``balance_*``), so playback
-needs neither the reference trajectory nor MuJoCo to run the controller.
+Walks with the robot's own steps add foothold tracking from leg odometry
+(:mod:`.stepping`): at each lift-off the servo present positions measure the last step, and the
+next steps carry the feet back to their planned footholds.
+
+The plan travels with the servo goals (``servo_goals.npz``, fields ``balance_*`` and, for a
+walk, ``step_*``), so playback needs neither the reference trajectory nor MuJoCo to run the
+controller.
 """
 
 from __future__ import annotations
@@ -41,6 +46,7 @@ import numpy as np
 
 from motok_robot.errors import InputError
 from motok_robot.feasibility.config import ROLES, BalanceConfig
+from motok_robot.feasibility.stepping import FootholdTracker, SteppingPlan
 
 #: file fields of a plan in servo_goals.npz (docs/CONTRACTS.md)
 PLAN_FIELDS = ("balance_fps", "balance_down", "balance_rate", "balance_tilt_matrix", "balance_rate_matrix",
@@ -57,6 +63,7 @@ class BalancePlan:
     tilt_matrix: np.ndarray  # [T, nj, 3] goal offset (rad) per rad of tilt error (IMU frame)
     rate_matrix: np.ndarray  # [T, nj, 3] goal offset (rad) per rad/s of rate error (IMU frame)
     config: BalanceConfig
+    stepping: SteppingPlan | None = None  # foothold tracking (walks with the robot's own steps)
 
     @property
     def num_frames(self) -> int:
@@ -68,7 +75,8 @@ class BalancePlan:
 
         return {"balance_fps": np.float64(self.fps), "balance_down": self.down, "balance_rate": self.rate,
                 "balance_tilt_matrix": self.tilt_matrix, "balance_rate_matrix": self.rate_matrix,
-                "balance_config": np.asarray(json.dumps(self.config.to_dict()))}
+                "balance_config": np.asarray(json.dumps(self.config.to_dict())),
+                **(self.stepping.fields() if self.stepping is not None else {})}
 
     @classmethod
     def from_fields(cls, fields: dict, nj: int, where: str) -> "BalancePlan | None":
@@ -101,7 +109,8 @@ class BalancePlan:
         except (ValueError, TypeError) as exc:
             raise InputError(f"{where}: field 'balance_config' is not a balance configuration: {exc}") from None
         return cls(fps=fps, down=arrays["balance_down"], rate=arrays["balance_rate"],
-                   tilt_matrix=arrays["balance_tilt_matrix"], rate_matrix=arrays["balance_rate_matrix"], config=config)
+                   tilt_matrix=arrays["balance_tilt_matrix"], rate_matrix=arrays["balance_rate_matrix"], config=config,
+                   stepping=SteppingPlan.from_fields(fields, T, nj, where))
 
 
 def imu_frame(model: mujoco.MjModel, root_body: int) -> tuple[int, int]:
@@ -159,9 +168,10 @@ def support_weights(contacts: np.ndarray, fps: float, swing_share: float) -> np.
 
 
 def build_plan(index, qpos: np.ndarray, fps: float, contacts: np.ndarray,
-               config: BalanceConfig | None = None) -> BalancePlan:
+               config: BalanceConfig | None = None, stepping: SteppingPlan | None = None) -> BalancePlan:
     """The controller's plan for the reference ``qpos`` [T, nq] at ``fps`` with foot contacts
-    ``contacts`` [T, 2] (left, right; bool) on robot ``index`` (a RobotIndex)."""
+    ``contacts`` [T, 2] (left, right; bool) on robot ``index`` (a RobotIndex); ``stepping``:
+    the foothold tracking of a walk (:func:`.stepping.build_stepping` of the same frames)."""
     config = config or BalanceConfig()
     qpos = np.asarray(qpos, dtype=np.float64)
     T = qpos.shape[0]
@@ -201,7 +211,7 @@ def build_plan(index, qpos: np.ndarray, fps: float, contacts: np.ndarray,
     tilt_matrix = (s * kp)[:, :, None] * in_imu
     rate_matrix = (s * kd)[:, :, None] * in_imu
     return BalancePlan(fps=float(fps), down=down, rate=rate, tilt_matrix=tilt_matrix, rate_matrix=rate_matrix,
-                       config=config)
+                       config=config, stepping=stepping)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -229,6 +239,7 @@ class BalanceController:
         self.high = np.asarray(joint_range, dtype=np.float64)[:, 1]
         self.batch = int(batch)
         self.dt = 1.0 / float(self.config.rate_hz)
+        self.tracker = FootholdTracker(plan.stepping, plan.fps, self.batch) if plan.stepping is not None else None
         self.reset()
 
     def reset(self, down: np.ndarray | None = None) -> None:
@@ -237,6 +248,8 @@ class BalanceController:
         self.down = np.broadcast_to(start, (self.batch, 3)).copy()
         self.gyro = np.broadcast_to(self.plan.rate[0], (self.batch, 3)).copy()
         self.last_offset = np.zeros((self.batch, self.low.size))
+        if self.tracker is not None:
+            self.tracker.reset()
 
     def clone(self, batch: int) -> "BalanceController":
         """A controller for ``batch`` robots starting from this one's estimator state (robot 0's)."""
@@ -244,6 +257,8 @@ class BalanceController:
         other.down[:] = self.down[0]
         other.gyro[:] = self.gyro[0]
         other.last_offset[:] = self.last_offset[0]
+        if self.tracker is not None:
+            other.tracker.copy_state(self.tracker)
         return other
 
     def _at(self, t: float):
@@ -263,8 +278,9 @@ class BalanceController:
              present: np.ndarray | None = None) -> np.ndarray:
         """Corrected goals [B, nj] for tick time ``t`` (s) from the trajectory's ``goals``
         [B, nj] and the IMU: ``gyro`` [B, 3] rad/s and ``accel`` [B, 3] m/s^2 (IMU frame).
-        ``present`` (servo present positions) is accepted for the rig's loop and unused by
-        this law.  Non-finite sensor values hold the last correction (a glitch is not acted on)."""
+        ``present`` [B, nj] (servo present positions, rad; None when not read this tick) feeds
+        the foothold tracking of a walk.  Non-finite sensor values hold the last correction (a
+        glitch is not acted on)."""
         goals = np.atleast_2d(np.asarray(goals, dtype=np.float64))
         gyro = np.atleast_2d(np.asarray(gyro, dtype=np.float64))
         accel = np.atleast_2d(np.asarray(accel, dtype=np.float64))
@@ -287,4 +303,9 @@ class BalanceController:
         if not all_ok:
             offset = np.where(ok[:, None], offset, self.last_offset)
         self.last_offset = offset
+        if self.tracker is not None:
+            if present is not None:
+                present = np.atleast_2d(np.asarray(present, dtype=np.float64))
+            step = self.tracker.offsets(t, present)
+            offset = offset + np.minimum(np.maximum(step, -cfg.max_offset_rad), cfg.max_offset_rad)
         return np.minimum(np.maximum(goals + offset, self.low), self.high)

@@ -65,6 +65,11 @@ class BalanceConfig:
     gyro_filter: float = 0.5
     #: the correction of one joint is clamped to this (rad)
     max_offset_rad: float = 0.35
+    #: foothold tracking on walks with the robot's own steps (:mod:`.stepping`): the share of
+    #: each step's error, measured from the servo present positions, that the next step
+    #: corrects (1: all of it; 0: off), and the largest correction of a foot per leg length
+    foothold_gain: float = 1.0
+    max_foothold_offset_per_leg: float = 0.1
 
     def __post_init__(self):
         for name in ("tilt_gain", "rate_gain"):
@@ -77,7 +82,8 @@ class BalanceConfig:
                     raise InputError(f"balance {name}.{role} = {value!r}: expected a number of magnitude < 10")
         _check_ranges("balance", self, (("rate_hz", 1.0, 2000.0), ("swing_share", 0.0, 1.0),
                                         ("accel_weight", 0.0, 1.0), ("gyro_filter", 1e-3, 1.0),
-                                        ("max_offset_rad", 0.0, 1.0)))
+                                        ("max_offset_rad", 0.0, 1.0), ("foothold_gain", 0.0, 1.0),
+                                        ("max_foothold_offset_per_leg", 0.0, 0.5)))
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -198,6 +204,10 @@ class FeasibilityConfig:
 
     #: play the motion this many times slower (1 = human timing); recorded as the time warp
     retime: float = 1.0
+    #: a motion that is not walked and needs more than this share of a servo's torque limit
+    #: (inverse dynamics of the task, joint damping included: a servo's back-EMF) is played
+    #: slower until it needs less, up to ``gait.max_time_warp`` in all (1: never slowed)
+    max_torque_share: float = 0.9
     #: move the CoM so the cart-table ZMP stays on the planned feet (:mod:`.zmp_shift`)
     zmp_shift: bool = True
     #: how far inside the support polygon the shifted ZMP is kept (m)
@@ -220,6 +230,8 @@ class FeasibilityConfig:
     def __post_init__(self):
         if not 1.0 <= float(self.retime) <= 4.0:
             raise InputError(f"feasibility retime = {self.retime}: must lie in [1, 4] (times slower)")
+        if not 0.5 <= float(self.max_torque_share) <= 1.0:
+            raise InputError(f"feasibility max_torque_share = {self.max_torque_share}: must lie in [0.5, 1]")
         if self.zmp_axes not in ("lateral", "both"):
             raise InputError(f"feasibility zmp_axes = {self.zmp_axes!r}: use lateral or both")
         if not 0.0 <= float(self.zmp_margin_m) <= 0.05:

@@ -2,7 +2,8 @@
 
 :func:`servo_model` copies the robot model for tracking (validation's open-loop rollout uses it
 too).  :class:`ServoPhysics` steps a batch of robots tick by tick: at each controller tick
-(``rate_hz``, 125 Hz by default) it reads each robot's IMU as a rig would, lets the
+(``rate_hz``, 125 Hz by default) it reads each robot's IMU and joint positions as a rig reads
+its IMU and servo present positions, lets the
 :class:`~motok_robot.feasibility.balance.BalanceController` correct the goals (or passes them
 through when there is none), writes them to the position actuators and advances the physics by
 the tick's steps (2 steps of 4 ms at 125 Hz).  Goals are held over a tick, as a servo holds the
@@ -153,13 +154,16 @@ class ServoPhysics:
         last = planned[:, 0].copy() if previous is None else np.broadcast_to(previous, planned[:, 0].shape).copy()
         gyro = np.zeros((B, 3))
         accel = np.zeros((B, 3))
+        present = np.zeros((B, self.index.nj))
+        joint_qpos = np.asarray(self.index.qpos_adr, dtype=int)
         step = 0
         for k in range(nticks):
             command = planned[:, k]
             if controller is not None:
                 for b, data in enumerate(datas):
                     gyro[b], accel[b] = read_imu(self.model, data, self.imu)
-                command = controller.step((tick0 + k) * self.tick_s, command, gyro, accel)
+                    present[b] = data.qpos[joint_qpos]
+                command = controller.step((tick0 + k) * self.tick_s, command, gyro, accel, present)
             command = np.clip(np.clip(command, last - max_step, last + max_step), low, high)
             last = command
             commands[:, k] = command

@@ -6,9 +6,11 @@ Steps (each recorded in the output's ``feasibility`` field and ``feasibility.jso
 2. the task: with ``gait.enabled`` a motion that travels is walked with the robot's own steps
    along its path (:func:`walk_task`: :mod:`.footsteps`, :mod:`.gait`; slower where the robot
    cannot step as fast, with standing added before and after); otherwise a CoM path whose
-   cart-table ZMP stays on the planned feet (:mod:`.zmp_shift`);
+   cart-table ZMP stays on the planned feet (:mod:`.zmp_shift`), played slower where it needs
+   more torque than ``max_torque_share`` of the servos' (:func:`torque_feasible_task`);
 3. servo goals with inverse-dynamics feedforward (:mod:`.feedforward`) of that task;
-4. the balance controller's plan (:mod:`.balance`), which validation and playback run;
+4. the balance controller's plan (:mod:`.balance`), which validation and playback run; on a
+   walk with the robot's own steps it tracks the planned footholds (:mod:`.stepping`);
 5. optional predictive-sampling refinement of the goals over physics rollouts (:mod:`.refine`);
 6. the rollout of the goals from rest with the controller in the loop: ``qpos`` of the output.
 
@@ -40,6 +42,7 @@ from motok_robot.feasibility.gait import generate_gait
 from motok_robot.feasibility.feedforward import GOALS_FILE, feedforward_goals, save_servo_goals, servo_gains
 from motok_robot.feasibility.physics import execute, servo_model
 from motok_robot.feasibility.refine import refine_goals
+from motok_robot.feasibility.stepping import build_stepping
 from motok_robot.feasibility.zmp_shift import shift_com
 
 RECORD_FILE = "feasibility.json"
@@ -93,6 +96,49 @@ def first_lifted_foot(contacts: np.ndarray) -> int:
         if lifted.any():
             return int(np.nonzero(lifted)[0][0])
     return 1
+
+
+def _spot_task(trajectory, index, config) -> tuple[np.ndarray, dict]:
+    """The task of a motion that is not walked: its CoM moved so the cart-table ZMP stays on
+    its feet (:mod:`.zmp_shift`) when ``config.zmp_shift``, else the motion itself."""
+    reference = np.asarray(trajectory.qpos, dtype=np.float64)
+    if not config.zmp_shift:
+        return reference, {}
+    contacts = sole_contacts(index, reference, config.contact_height_m)
+    shifted = shift_com(index, reference, float(trajectory.fps), contacts, margin_m=config.zmp_margin_m,
+                        axes=config.zmp_axes)
+    return shifted.qpos, {"zmp_shift": shifted.record()}
+
+
+def torque_share(index, task: np.ndarray, fps: float, config) -> float:
+    """The largest required torque of ``task`` [T, nq] over any joint, as a share of its limit."""
+    torque = required_torque(index, task, fps, config.contact_height_m, config.friction)[2]
+    return float((np.abs(torque) / np.maximum(index.torque_limit, 1e-9)).max()) if torque.size else 0.0
+
+
+def torque_feasible_task(trajectory, index, config, tries: int = 4):
+    """(trajectory, task, record) of a motion that is not walked, played slower where its task
+    needs more than ``config.max_torque_share`` of a servo's torque: each try slows it by the
+    share it needs over that (joint damping, a servo's back-EMF, is the part that falls with
+    speed), the whole time warp at most ``config.gait.max_time_warp``.  The record's
+    ``torque_retime`` says by how much, from which share to which."""
+    from retarget.retime import retime
+
+    fps = float(trajectory.fps)
+    task, record = _spot_task(trajectory, index, config)
+    share = first = torque_share(index, task, fps, config)
+    slowed = 1.0
+    for _ in range(tries if config.max_torque_share < 1.0 else 0):
+        room = config.gait.max_time_warp / float(trajectory.retime_factor)
+        if share <= config.max_torque_share or room <= 1.0 + 1e-6:
+            break
+        factor = min(room, max(1.05, share / config.max_torque_share))
+        trajectory = retime(trajectory, factor)
+        slowed *= factor
+        task, record = _spot_task(trajectory, index, config)
+        share = torque_share(index, task, float(trajectory.fps), config)
+    record["torque_retime"] = {"factor": slowed, "torque_share_before": first, "torque_share_after": share}
+    return trajectory, task, record
 
 
 def walk_task(trajectory, index, config, record: dict):
@@ -150,11 +196,12 @@ def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, pr
         trajectory, task, plan_contacts, loaded = walk
         reference = np.asarray(trajectory.qpos, dtype=np.float64)
         record["time_warp"] = float(trajectory.retime_factor)
-    elif config.zmp_shift:
-        contacts = sole_contacts(index, reference, config.contact_height_m)
-        shifted = shift_com(index, reference, fps, contacts, margin_m=config.zmp_margin_m, axes=config.zmp_axes)
-        task = shifted.qpos
-        record["zmp_shift"] = shifted.record()
+    else:
+        trajectory, task, torque_record = torque_feasible_task(trajectory, index, config)
+        reference = np.asarray(trajectory.qpos, dtype=np.float64)
+        record["time_warp"] = float(trajectory.retime_factor)
+        record["torque_retime"] = torque_record.pop("torque_retime")
+        record.update(torque_record)
     timing["task"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     joint_pos, joint_vel, torque = required_torque(index, task, fps, config.contact_height_m, config.friction,
@@ -163,7 +210,12 @@ def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, pr
     goals = feedforward_goals(index, joint_pos, joint_vel, torque, fps, stiffness, damping, config.goal_velocity_fraction)
     if plan_contacts is None:
         plan_contacts = sole_contacts(index, task, config.contact_height_m)
-    plan = build_plan(index, task, fps, plan_contacts, config.balance) \
+    stepping = None
+    if walk is not None and config.balance.enabled and config.balance.foothold_gain > 0:
+        stepping = build_stepping(index, task, fps, plan_contacts, lift_share=config.gait.vertical_share,
+                                  gain=config.balance.foothold_gain,
+                                  max_offset_m=config.balance.max_foothold_offset_per_leg * RobotFeet(index).leg_length)
+    plan = build_plan(index, task, fps, plan_contacts, config.balance, stepping) \
         if config.balance.enabled else None
     timing["goals"] = time.perf_counter() - t0
     if config.refine:
