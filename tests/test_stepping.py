@@ -151,3 +151,10 @@ def test_a_motion_that_needs_more_torque_than_the_servos_have_is_played_slower(o
     assert kept.record["torque_retime"]["factor"] == 1.0 and kept.record["time_warp"] == 1.0
     with pytest.raises(InputError, match="max_torque_share"):
         FeasibilityConfig(max_torque_share=0.2)
+
+
+def test_a_walk_on_its_retargeted_legs_keeps_its_timing(op3, retargeted):
+    qpos = S.walk(op3, steps=6, step_period_s=1.0, fps=20.0, double_support=0.2)
+    result = make_feasible(retargeted(op3, qpos), op3, FeasibilityConfig(max_torque_share=0.5))
+    record = result.record["torque_retime"]
+    assert record["travels"] and record["factor"] == 1.0 and result.record["time_warp"] == 1.0

@@ -34,6 +34,11 @@ def register(commands, groups) -> None:
     parser.add_argument("--own-steps", action="store_true",
                         help="walk a motion that travels with the robot's own steps along its path (footsteps, CoM "
                              "and swing planned for the robot; played slower where it cannot step as fast)")
+    parser.add_argument("--max-torque-share", type=float, default=0.9, metavar="S",
+                        help="a motion that is not walked is played slower while it needs more than S of a servo's "
+                             "torque limit, 0.5-1 (default 0.9; 1: never slowed for torque)")
+    parser.add_argument("--no-foothold-tracking", action="store_true",
+                        help="with --own-steps: do not correct each step from the measured last one (leg odometry)")
     parser.add_argument("--no-balance", action="store_true", help="no balance controller (open-loop goals)")
     parser.add_argument("--refine", action="store_true", help="refine the goals by predictive sampling (slower)")
     parser.add_argument("--samples", type=int, default=None, help="refinement: rollouts per planning step (default 16)")
@@ -56,7 +61,9 @@ def run_feasible(args) -> int:
     if args.horizon is not None:
         refine = dataclasses.replace(refine, horizon_s=args.horizon)
     config = FeasibilityConfig(retime=args.retime, zmp_shift=not args.no_zmp_shift, zmp_axes=args.zmp_axes,
-                               refine=args.refine, balance=BalanceConfig(enabled=not args.no_balance),
+                               max_torque_share=args.max_torque_share, refine=args.refine,
+                               balance=BalanceConfig(enabled=not args.no_balance,
+                                                     foothold_gain=0.0 if args.no_foothold_tracking else 1.0),
                                refine_config=refine, gait=GaitConfig(enabled=args.own_steps))
     path = Path(args.input)
     if not path.is_file():
@@ -80,11 +87,14 @@ def run_feasible(args) -> int:
     rec = result.record
     shift = rec.get("zmp_shift")
     walk = rec.get("gait")
+    slow = rec.get("torque_retime")
     print(f"{index.name}: {result.trajectory.qpos.shape[0]} frames, time warp {rec['time_warp']:.2f}x"
           + (f", CoM moved up to {shift['com_shift_m_max'] * 100:.1f} cm (cart-table ZMP outside "
              f"{shift['zmp_outside_before']:.0%} -> {shift['zmp_outside_after']:.0%} of support frames)" if shift else "")
           + (f", walked with {walk['steps']} steps of its own (lead-in {walk['lead_in_s']:.1f} s, lead-out "
-             f"{walk['lead_out_s']:.1f} s)" if walk else ""))
+             f"{walk['lead_out_s']:.1f} s)" if walk else "")
+          + (f", played {slow['factor']:.2f}x slower for the servos' torque (needed {slow['torque_share_before']:.2f} "
+             f"of a limit, now {slow['torque_share_after']:.2f})" if slow and slow["factor"] > 1 else ""))
     if args.own_steps and not walk:
         print("  --own-steps: the motion does not travel (or lifts a foot higher than a step): its legs are kept")
     print(f"  executed from rest{' with the balance controller' if result.plan is not None else ' open loop'}: "

@@ -167,8 +167,11 @@ class GaitConfig:
     turn_per_step_rad: float = 0.3
     #: how high the swing foot lifts at mid-swing, per leg length (0.15 on op3_like = 3.8 cm)
     clearance_per_leg: float = 0.15
-    #: the swing foot rises and lands vertically over this share of the swing at each end
-    vertical_share: float = 0.15
+    #: the swing foot rises and lands vertically over this share of the swing at each end (0.05:
+    #: until it is 6 mm up on op3_like); the shorter it is, the slower the swing moves across
+    #: (its joints' damping, a servo's back-EMF, takes most of the identified OP3's torque at
+    #: the peak: 0.15 failed `torque` on every real walk there)
+    vertical_share: float = 0.05
     #: the ZMP target of a stance foot lies this far (per leg length) outward of its sole centre
     #: (0.04 on op3_like = 1 cm): the CoM then stands over the stance foot where its sway turns
     zmp_outward_per_leg: float = 0.04

@@ -205,6 +205,8 @@ def feasible(config, entry: dict, files: dict, tmp: Path, notes: list) -> dict:
                  + (f", CoM moved up to {shift['com_shift_m_max'] * 100:.1f} cm" if shift else "")
                  + (f", walked with {rec['gait']['steps']} steps of its own (standing {rec['gait']['lead_in_s']:.1f} s "
                     f"before and {rec['gait']['lead_out_s']:.1f} s after)" if "gait" in rec else "")
+                 + (f", {rec['torque_retime']['factor']:.2f}x of it for the servos' torque"
+                    if (rec.get("torque_retime") or {}).get("factor", 1.0) > 1 else "")
                  + (f", goals refined ({rec['refine']['rollouts']} rollouts)" if "refine" in rec else "")
                  + ("; the robot FELL" if result.fell else ""))
     return load_servo_goals(tmp / "servo_goals.npz")
