@@ -35,7 +35,7 @@ def register(commands, groups) -> None:
                         help="walk a motion that travels with the robot's own steps along its path (footsteps, CoM "
                              "and swing planned for the robot; played slower where it cannot step as fast)")
     parser.add_argument("--max-torque-share", type=float, default=0.9, metavar="S",
-                        help="a motion that is not walked is played slower while it needs more than S of a servo's "
+                        help="a motion on the spot is played slower while it needs more than S of a servo's "
                              "torque limit, 0.5-1 (default 0.9; 1: never slowed for torque)")
     parser.add_argument("--no-foothold-tracking", action="store_true",
                         help="with --own-steps: do not correct each step from the measured last one (leg odometry)")

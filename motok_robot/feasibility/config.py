@@ -207,9 +207,9 @@ class FeasibilityConfig:
 
     #: play the motion this many times slower (1 = human timing); recorded as the time warp
     retime: float = 1.0
-    #: a motion that is not walked and needs more than this share of a servo's torque limit
-    #: (inverse dynamics of the task, joint damping included: a servo's back-EMF) is played
-    #: slower until it needs less, up to ``gait.max_time_warp`` in all (1: never slowed)
+    #: a motion on the spot (it does not travel) that needs more than this share of a servo's
+    #: torque limit (inverse dynamics of the task, joint damping included: a servo's back-EMF)
+    #: is played slower until it needs less, up to ``gait.max_time_warp`` in all (1: never slowed)
     max_torque_share: float = 0.9
     #: move the CoM so the cart-table ZMP stays on the planned feet (:mod:`.zmp_shift`)
     zmp_shift: bool = True

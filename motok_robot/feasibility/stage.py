@@ -6,8 +6,9 @@ Steps (each recorded in the output's ``feasibility`` field and ``feasibility.jso
 2. the task: with ``gait.enabled`` a motion that travels is walked with the robot's own steps
    along its path (:func:`walk_task`: :mod:`.footsteps`, :mod:`.gait`; slower where the robot
    cannot step as fast, with standing added before and after); otherwise a CoM path whose
-   cart-table ZMP stays on the planned feet (:mod:`.zmp_shift`), played slower where it needs
-   more torque than ``max_torque_share`` of the servos' (:func:`torque_feasible_task`);
+   cart-table ZMP stays on the planned feet (:mod:`.zmp_shift`), a motion on the spot played
+   slower where it needs more than ``max_torque_share`` of the servos' torque
+   (:func:`torque_feasible_task`);
 3. servo goals with inverse-dynamics feedforward (:mod:`.feedforward`) of that task;
 4. the balance controller's plan (:mod:`.balance`), which validation and playback run; on a
    walk with the robot's own steps it tracks the planned footholds (:mod:`.stepping`);
