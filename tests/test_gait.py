@@ -140,6 +140,22 @@ def test_the_whole_body_puts_the_feet_on_the_footholds_within_the_velocity_limit
     assert np.array_equal(walk.qpos[:, op3.qpos_adr[arms]], qpos[:, op3.qpos_adr[arms]])  # upper body kept
 
 
+def test_the_walks_joints_stay_below_the_speed_their_damping_allows(op3):
+    from motok_robot.feasibility.stage import damping_speed_limit
+
+    limit = damping_speed_limit(op3, 0.75)
+    damping = op3.kin_model.dof_damping[op3.dof_adr]
+    assert np.allclose(limit[damping > 0], 0.75 * op3.torque_limit[damping > 0] / damping[damping > 0])
+    qpos = _gliding(op3, 3.0, 0.06)
+    schedule = plan_steps(op3, qpos, FPS, first_step_frame=12)
+    free = generate_gait(op3, qpos, FPS, schedule)
+    legs = [j for j, n in enumerate(op3.joint_names) if not ("sho" in n or "el" in n or "head" in n)]
+    speed = lambda w: np.abs(np.diff(w.qpos[:, op3.qpos_adr[legs]], axis=0)).max() * FPS  # noqa: E731
+    assert speed(free) > 1.0  # the walk moves its legs faster than the bound below
+    bounded = generate_gait(op3, qpos, FPS, schedule, speed_limit=np.full(op3.nj, 1.0))
+    assert speed(bounded) <= 1.0 + 1e-6
+
+
 def test_only_a_motion_that_goes_somewhere_is_walked(op3):
     feet, config = RobotFeet(op3), GaitConfig()
     assert walks(op3, S.walk(op3, steps=6, step_period_s=1.0, fps=FPS), feet, config)

@@ -172,6 +172,11 @@ class GaitConfig:
     #: (its joints' damping, a servo's back-EMF, takes most of the identified OP3's torque at
     #: the peak: 0.15 failed `torque` on every real walk there)
     vertical_share: float = 0.05
+    #: > 0: the walk's joints move no faster than where their damping (a servo's back-EMF)
+    #: takes this share of the torque limit (the identified OP3 at 0.75: 4.1 / 1.084 x 0.75 =
+    #: 2.8 rad/s); 0: off.  Measured at 0.75: real walks passing on the OP3 2 -> 10 of 31,
+    #: on op3_like 19 -> 10 (the bounded legs miss their footholds), so it is off by default
+    damping_speed_share: float = 0.0
     #: the ZMP target of a stance foot lies this far (per leg length) outward of its sole centre
     #: (0.04 on op3_like = 1 cm): the CoM then stands over the stance foot where its sway turns
     zmp_outward_per_leg: float = 0.04
@@ -193,6 +198,7 @@ class GaitConfig:
                                      ("zmp_transfer_share", 0.1, 1.0),
                                      ("advance_per_leg", 0.02, 1.0), ("turn_per_step_rad", 0.0, 1.0),
                                      ("clearance_per_leg", 0.0, 0.5), ("vertical_share", 0.0, 0.45),
+                                     ("damping_speed_share", 0.0, 1.0),
                                      ("zmp_outward_per_leg", 0.0, 0.2), ("lead_in_s", 0.0, 5.0),
                                      ("lead_out_s", 0.0, 5.0), ("max_time_warp", 1.0, 4.0),
                                      ("min_travel_per_leg", 0.0, 10.0), ("max_lift_per_leg", 0.0, 2.0)))

@@ -145,6 +145,7 @@ def zmp_reference(schedule: StepSchedule, transfer_share: float = 1.0) -> np.nda
 def generate_gait(index, qpos: np.ndarray, fps: float, schedule: StepSchedule, *, rate_hz: float = 100.0,
                   jerk_weight: float = 1e-7, passes: int = 6, reach_window_s: float = 0.1,
                   max_drop_fraction: float = 0.2, velocity_fraction: float = 0.9,
+                  speed_limit: np.ndarray | None = None,
                   base_yaw: np.ndarray | None = None, zmp_transfer_share: float = 1.0) -> GaitResult:
     """The task trajectory [T, nq] walking ``schedule`` with the upper body, base height and
     orientation of reference ``qpos`` [T, nq] at ``fps`` (see the module docstring); with
@@ -179,7 +180,10 @@ def generate_gait(index, qpos: np.ndarray, fps: float, schedule: StepSchedule, *
     kernel = np.ones(2 * window + 1) / (2 * window + 1)
     leg_q = np.concatenate([a for a, _ in legs])
     max_step = np.full(model.nq, np.inf)
-    max_step[index.qpos_adr] = velocity_fraction * np.asarray(index.velocity_limit, dtype=np.float64) / fps
+    joint_speed = velocity_fraction * np.asarray(index.velocity_limit, dtype=np.float64)
+    if speed_limit is not None:
+        joint_speed = np.minimum(joint_speed, np.asarray(speed_limit, dtype=np.float64))
+    max_step[index.qpos_adr] = joint_speed / fps
     for _ in range(passes):
         out[:, leg_q] = qpos[:, leg_q]  # each pass starts from the reference's legs (a straight
         # knee is a singular point the leg solve cannot bend back out of)

@@ -147,6 +147,14 @@ def torque_feasible_task(trajectory, index, config, tries: int = 4):
     return trajectory, task, record
 
 
+def damping_speed_limit(index, share: float) -> np.ndarray:
+    """[nj] rad/s: the speed at which each joint's damping (a servo's back-EMF in an identified
+    model) takes ``share`` of its torque limit; inf for a joint without damping."""
+    damping = np.asarray(index.kin_model.dof_damping, dtype=np.float64)[np.asarray(index.dof_adr, dtype=int)]
+    limit = np.asarray(index.torque_limit, dtype=np.float64)
+    return np.where(damping > 0, share * limit / np.maximum(damping, 1e-12), np.inf)
+
+
 def walk_task(trajectory, index, config, record: dict):
     """(trajectory, task qpos, planned contacts, feet planned to carry weight) of the robot's own
     walk along ``trajectory``'s path (:mod:`.footsteps`, :mod:`.gait`), or None when the motion
@@ -175,7 +183,9 @@ def walk_task(trajectory, index, config, record: dict):
                           first_foot=first_lifted_foot(contacts), feet=feet, offsets=offsets,
                           lift_share=gait.vertical_share, zmp_outward_per_leg=gait.zmp_outward_per_leg)
     walk = generate_gait(index, reference, fps, schedule, base_yaw=schedule.heading,
-                         zmp_transfer_share=gait.zmp_transfer_share)
+                         zmp_transfer_share=gait.zmp_transfer_share,
+                         speed_limit=damping_speed_limit(index, gait.damping_speed_share)
+                         if gait.damping_speed_share > 0 else None)
     record["gait"] = {"time_warp": warp, "lead_in_s": before / fps, "lead_out_s": round(gait.lead_out_s * fps) / fps,
                       **schedule.record(), **walk.record()}
     return trajectory, walk.qpos, walk.contacts, schedule.loaded
