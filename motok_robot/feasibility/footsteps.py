@@ -157,6 +157,15 @@ def time_warp_for(qpos: np.ndarray, fps: float, feet: RobotFeet, step_period_s: 
     return float(min(need, max_time_warp))
 
 
+def swing_progress(n: int, lift_share: float) -> np.ndarray:
+    """[n] horizontal progress (0 -> 1) of a swing foot over the ``n`` frames of its swing: it
+    moves across only once up, after the first and before the last ``lift_share`` of the swing,
+    along a minimum-jerk profile."""
+    u = (np.arange(n) + 1) / (n + 1)
+    v = np.clip((u - lift_share) / max(1e-9, 1 - 2 * lift_share), 0.0, 1.0)
+    return 10 * v ** 3 - 15 * v ** 4 + 6 * v ** 5
+
+
 def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, step_period_s: float = 0.5,
                double_support: float = 0.2, advance_per_leg: float = 0.27, turn_per_step_rad: float = 0.3,
                clearance_per_leg: float = 0.15, first_foot: int = 1, feet: RobotFeet | None = None,
@@ -233,10 +242,10 @@ def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, st
                 loaded[t0:t0 + ds, swing] = False
             lift_frames = range(t0 + ds, land)
             n = len(lift_frames)
+            across = swing_progress(n, lift_share)
             for i, t in enumerate(lift_frames):
                 u = (i + 1) / (n + 1)
-                v = np.clip((u - lift_share) / (1 - 2 * lift_share), 0.0, 1.0)  # across only once up
-                ease = 10 * v ** 3 - 15 * v ** 4 + 6 * v ** 5
+                ease = across[i]
                 foot_pos[t, swing] = p0 + ease * (p1 - p0)
                 foot_pos[t, swing, 2] = p0[2] + ease * (p1[2] - p0[2]) + lift * np.sin(np.pi * u)
                 foot_quat[t, swing] = feet.flat_quat(swing, yaw0 + ease * (goal_yaw - yaw0))

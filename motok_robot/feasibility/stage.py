@@ -213,11 +213,10 @@ def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, pr
         reference = np.asarray(trajectory.qpos, dtype=np.float64)
         record["time_warp"] = float(trajectory.retime_factor)
     else:
-        trajectory, task, torque_record = torque_feasible_task(trajectory, index, config)
+        trajectory, task, task_record = torque_feasible_task(trajectory, index, config)
         reference = np.asarray(trajectory.qpos, dtype=np.float64)
         record["time_warp"] = float(trajectory.retime_factor)
-        record["torque_retime"] = torque_record.pop("torque_retime")
-        record.update(torque_record)
+        record.update(task_record)
     timing["task"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     joint_pos, joint_vel, torque = required_torque(index, task, fps, config.contact_height_m, config.friction,

@@ -100,8 +100,10 @@ class SteppingPlan:
 
 def swing_ramp(contacts: np.ndarray, lift_share: float) -> np.ndarray:
     """[T, 2]: 1 where a foot is in contact; over each swing the horizontal progress of the swing
-    foot as :func:`~motok_robot.feasibility.footsteps.plan_steps` moves it (it rises and lands
-    vertically over ``lift_share`` of the swing at each end, a minimum-jerk move in between)."""
+    foot as :func:`~motok_robot.feasibility.footsteps.plan_steps` moves it
+    (:func:`~motok_robot.feasibility.footsteps.swing_progress`)."""
+    from motok_robot.feasibility.footsteps import swing_progress
+
     contacts = np.asarray(contacts, dtype=bool)
     T = contacts.shape[0]
     ramp = np.ones((T, 2))
@@ -114,10 +116,7 @@ def swing_ramp(contacts: np.ndarray, lift_share: float) -> np.ndarray:
             s = t
             while t < T and not contacts[t, k]:
                 t += 1
-            n = t - s
-            u = (np.arange(n) + 1) / (n + 1)
-            v = np.clip((u - lift_share) / max(1e-9, 1 - 2 * lift_share), 0.0, 1.0)
-            ramp[s:t, k] = 10 * v ** 3 - 15 * v ** 4 + 6 * v ** 5
+            ramp[s:t, k] = swing_progress(t - s, lift_share)
     return ramp
 
 
@@ -178,6 +177,7 @@ def build_stepping(index, qpos: np.ndarray, fps: float, contacts: np.ndarray, *,
     jr = np.zeros((2, 3, model.nv))
     target = np.zeros((6, 2))
     target[0, 0] = target[1, 1] = 1.0  # a horizontal move, height and orientation kept
+    all_dofs = np.asarray(index.dof_adr, dtype=int)
     for t in range(T):
         data.qpos[:] = qpos[t]
         mujoco.mj_kinematics(model, data)
@@ -190,9 +190,8 @@ def build_stepping(index, qpos: np.ndarray, fps: float, contacts: np.ndarray, *,
             J = np.vstack([jp[k][:, dofs], jr[k][:, dofs]])  # [6, m]: the foot relative to the base
             correct[t, k][cols] = J.T @ np.linalg.solve(J @ J.T + damping * np.eye(6), target)
         for e in event_at.get(t, []):
-            _, a, c = events[e]
-            dofs = np.asarray(index.dof_adr, dtype=int)
-            measure[e] = jp[1 - a][:2, dofs] - jp[a][:2, dofs]  # d(foot c - foot a)/dq, c = 1 - a
+            a = events[e][1]
+            measure[e] = jp[1 - a][:2, all_dofs] - jp[a][:2, all_dofs]  # d(foot c - foot a)/dq, c = 1 - a
             joints[e] = qpos[t, index.qpos_adr]
     ramp = swing_ramp(contacts, lift_share)
     for frame, a, _ in events:  # the lifting foot's offset starts easing at its last frame down
