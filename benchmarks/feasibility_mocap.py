@@ -6,12 +6,15 @@ it) and then measured by the same validation call (``validate_file``, closed loo
 no plots or video) in up to three variants:
 
 * ``A`` (baseline): the retargeted robot.npz validated as it is (today's path);
-* ``B`` (feasible): ``make_feasible(..., FeasibilityConfig())`` + ``write_feasible``, then the
-  stage's robot.npz validated (it replays the stage's goals and plan, judged against the reference);
-* ``C`` (feasible, slowed): the same with ``FeasibilityConfig(retime=1.5)``;
-* ``D`` (feasible, own steps): the same with ``GaitConfig(enabled=True)``: a clip that travels is
+* ``B`` (feasible): ``make_feasible(..., robot_config(index))`` (the robot's own settings, from
+  its description) + ``write_feasible``, then the stage's robot.npz validated (it replays the
+  stage's goals and plan, judged against the reference);
+* ``C`` (feasible, slowed): the same with ``retime`` 1.5;
+* ``D`` (feasible, own steps): the same with ``gait.enabled``: a clip that travels is
   walked with the robot's own steps along its path (docs/feasibility.md, "Walking with the
   robot's own steps").
+
+``--settings JSON`` applies more settings over every stage variant (to measure one change).
 
 Clip set (from ``--datasets``, default ``../shared/datasets``; extracted into ``--work``):
 
@@ -29,7 +32,7 @@ recorded as that row's ``error`` and the run goes on.  The JSON is rewritten aft
 Usage::
 
     python benchmarks/feasibility_mocap.py [--robots op3_like] [--variants A B C] [--clips 'dataset-1_walk_*']
-        [--groups locomotion] [--max-clips N] [--work /tmp/feasibility_mocap] [--out JSON]
+        [--groups locomotion] [--max-clips N] [--work /tmp/feasibility_mocap] [--settings JSON] [--out JSON]
 
 Prints a progress line per row, the row table and pass counts per group x variant; writes
 JSON with the machine description (default ``benchmarks/results/feasibility_mocap_<robots>.json``).
@@ -59,6 +62,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import REPO_ROOT, RESULTS_DIR, machine_description, markdown_table, write_json  # noqa: E402
 
 VARIANTS = {"A": "baseline", "B": "feasible", "C": "feasible_retime1.5", "D": "feasible_own_steps"}
+#: each stage variant's settings over the robot's own (``robot_config``)
+VARIANT_SETTINGS = {"B": {}, "C": {"retime": 1.5}, "D": {"gait": {"enabled": True}}}
 METRICS = ("fell", "fall_time_s", "base_drift_m", "tracking_rmse_rad", "pose_error_mean_m", "heading_error_max_rad",
            "zmp_outside_ratio", "max_torque_ratio")
 #: Bandai contents besides the walks, first take of style "normal" (the first style present otherwise)
@@ -206,19 +211,19 @@ def retarget_cached(clip: dict, robot_name: str, work: Path) -> tuple[Path, dict
     return npz, {**meta, "cached": False}
 
 
-def run_variant(variant: str, npz: Path, index, out: Path) -> dict:
-    """Feasibility stage (B, C, D) and validation of one variant; fields of the row."""
+def run_variant(variant: str, npz: Path, index, out: Path, settings: dict | None = None) -> dict:
+    """Feasibility stage (B, C, D; the robot's settings, the variant's, then ``settings``) and
+    validation of one variant; fields of the row."""
     from motok_robot.sim.validate import validate_file
 
     row: dict = {"stage_s": {}}
     if variant in ("B", "C", "D"):
-        from motok_robot.feasibility.config import FeasibilityConfig, GaitConfig
+        from motok_robot.feasibility.config import robot_config
         from motok_robot.feasibility.stage import make_feasible, write_feasible
         from retarget.io import read_robot_npz
 
         t0 = time.perf_counter()
-        config = (FeasibilityConfig(retime=1.5) if variant == "C" else
-                  FeasibilityConfig(gait=GaitConfig(enabled=True)) if variant == "D" else FeasibilityConfig())
+        config = robot_config(index, VARIANT_SETTINGS[variant]).with_settings(settings or {}, "--settings")
         result = make_feasible(read_robot_npz(npz), index, config)
         npz = write_feasible(result, out / "feasible", index.name)
         row["stage_s"]["feasible"] = time.perf_counter() - t0
@@ -290,6 +295,9 @@ def main(argv=None) -> int:
                     help="extracted clips, cached retargets and the per-variant outputs")
     ap.add_argument("--out", type=Path, default=None,
                     help="JSON (default benchmarks/results/feasibility_mocap_<robots>.json)")
+    ap.add_argument("--settings", type=json.loads, default={}, metavar="JSON",
+                    help="feasibility settings applied over each variant's, e.g. "
+                         "'{\"gait\": {\"damping_speed_share\": 0}}' (recorded in the JSON)")
     args = ap.parse_args(argv)
     out = args.out or RESULTS_DIR / f"feasibility_mocap_{'+'.join(args.robots)}.json"
 
@@ -316,7 +324,8 @@ def main(argv=None) -> int:
 
     started = time.perf_counter()
     rows: list[dict] = []
-    meta = {"variants": {v: VARIANTS[v] for v in args.variants}, "found": found, "datasets": str(args.datasets),
+    meta = {"variants": {v: VARIANTS[v] for v in args.variants}, "settings": args.settings,
+            "found": found, "datasets": str(args.datasets),
             "clips": [{k: c[k] for k in ("clip", "group", "source") if k in c} | {"label": c.get("label")} for c in clips]}
     machine = machine_description()
     import motok_robot
@@ -344,7 +353,8 @@ def main(argv=None) -> int:
                     row["error"], row["traceback"] = retarget_error, retarget_traceback
                 else:
                     try:
-                        part = run_variant(variant, npz, index, args.work / "runs" / robot_name / clip["clip"] / variant)
+                        part = run_variant(variant, npz, index, args.work / "runs" / robot_name / clip["clip"] / variant,
+                                           args.settings)
                         stage_s.update(part.pop("stage_s"))
                         row.update(part)
                     except Exception as exc:

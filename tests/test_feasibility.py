@@ -177,3 +177,37 @@ def test_loading_the_cli_does_not_import_mujoco():
     code = ("import sys, motok_robot.cli, motok_robot.feasibility, motok_robot.feasibility.cli; "
             "assert 'mujoco' not in sys.modules, 'mujoco imported'")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_a_robots_description_sets_its_feasibility_settings_and_the_user_overrides_them(op3):
+    """``[feasibility]`` in the description is applied over the defaults and under what a user asks."""
+    import dataclasses
+
+    from motok_robot.feasibility.config import GaitConfig, robot_config
+
+    assert robot_config(op3) == FeasibilityConfig()  # op3_like sets nothing
+    own = dataclasses.replace(op3, feasibility_settings={"gait": {"damping_speed_share": 0.75},
+                                                         "balance": {"rate_gain": {"knee": 0.05}}},
+                              description_file="mine.toml")
+    config = robot_config(own, {"gait": {"enabled": True}})
+    assert config.gait == GaitConfig(enabled=True, damping_speed_share=0.75)
+    assert config.balance.rate_gain["knee"] == 0.05 and config.balance.rate_gain["ankle_pitch"] == 0.1
+    assert robot_config(own, {"gait": {"damping_speed_share": 0.0}}).gait.damping_speed_share == 0.0
+    for bad, words in (({"gait": {"step_periods": 1}}, ("mine.toml", "[feasibility.gait]", "step_periods")),
+                       ({"gait": {"step_period_s": "slow"}}, ("mine.toml", "step_period_s", "number")),
+                       ({"gait": {"step_period_s": 9.0}}, ("mine.toml", "step_period_s", "[0.2, 2.0]")),
+                       ({"zmp_shift": 1}, ("mine.toml", "zmp_shift", "bool")),
+                       ({"gait": 0.5}, ("mine.toml", "[feasibility.gait]", "table"))):
+        with pytest.raises(InputError) as err:
+            robot_config(dataclasses.replace(own, feasibility_settings=bad))
+        assert all(w in str(err.value) for w in words), (bad, str(err.value))
+
+
+def test_every_installed_robots_feasibility_settings_are_valid():
+    """A description's ``[feasibility]`` table is read where the stage runs: check every shipped one."""
+    from motok_robot.feasibility.config import robot_config
+    from motok_robot.robots import list_robots
+
+    for name in list_robots():
+        index = index_robot(load(name))
+        robot_config(index, {"gait": {"enabled": True}})

@@ -220,9 +220,11 @@ def test_run_and_feasible_offer_the_own_steps_walk():
     commands = parser.add_subparsers()
     register_run(commands, {})
     register_feasible(commands, {})
-    config = feasibility_config(parser.parse_args(["run", "a person walks", "--out", "o", "--feasible", "--feasible-own-steps"]))
-    assert config.gait.enabled
-    assert not feasibility_config(parser.parse_args(["run", "a person walks", "--out", "o", "--feasible"])).gait.enabled
+    settings = feasibility_config(parser.parse_args(["run", "a person walks", "--out", "o", "--feasible", "--feasible-own-steps"]))
+    assert settings == {"gait": {"enabled": True}}  # applied over the robot's own settings
+    assert feasibility_config(parser.parse_args(["run", "a person walks", "--out", "o", "--feasible"])) == {}
+    assert feasibility_config(parser.parse_args(["run", "a person walks", "--out", "o", "--feasible",
+                                                 "--feasible-retime", "1.5"])) == {"retime": 1.5}
     with pytest.raises(InputError, match="--feasible-own-steps needs --feasible"):
         feasibility_config(parser.parse_args(["run", "a person walks", "--out", "o", "--feasible-own-steps"]))
     assert parser.parse_args(["feasible", "robot.npz", "--out", "o", "--own-steps"]).own_steps

@@ -26,20 +26,21 @@ def register(commands, groups) -> None:
     parser.add_argument("input", help="robot.npz from retargeting")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
     parser.add_argument("--robot", help="installed robot name (default: the 'robot' field of the npz)")
-    parser.add_argument("--retime", type=float, default=1.0, metavar="F",
+    parser.add_argument("--retime", type=float, default=None, metavar="F",
                         help="play the motion F times slower, 1-4 (default 1: human timing)")
     parser.add_argument("--no-zmp-shift", action="store_true", help="keep the retargeted CoM path")
-    parser.add_argument("--zmp-axes", choices=("lateral", "both"), default="lateral",
+    parser.add_argument("--zmp-axes", choices=("lateral", "both"), default=None,
                         help="directions the CoM may move (default lateral)")
     parser.add_argument("--own-steps", action="store_true",
                         help="walk a motion that travels with the robot's own steps along its path (footsteps, CoM "
                              "and swing planned for the robot; played slower where it cannot step as fast)")
-    parser.add_argument("--max-torque-share", type=float, default=0.9, metavar="S",
+    parser.add_argument("--max-torque-share", type=float, default=None, metavar="S",
                         help="a motion on the spot is played slower while it needs more than S of a servo's "
-                             "torque limit, 0.5-1 (default 0.9; 1: never slowed for torque)")
-    parser.add_argument("--damping-speed-share", type=float, default=0.0, metavar="S",
+                             "torque limit, 0.5-1 (default: the robot's, else 0.9; 1: never slowed for torque)")
+    parser.add_argument("--damping-speed-share", type=float, default=None, metavar="S",
                         help="with --own-steps: the walk's joints move no faster than where their damping takes S of "
-                             "the torque limit, 0-1 (default 0: off; 0.75 passes 10 of 31 real walks on op3, 2 without)")
+                             "the torque limit, 0-1 (default: the robot's [feasibility.gait] setting, else 0: off; "
+                             "op3 sets 0.75)")
     parser.add_argument("--no-foothold-tracking", action="store_true",
                         help="with --own-steps: do not correct each step from the measured last one (leg odometry)")
     parser.add_argument("--no-balance", action="store_true", help="no balance controller (open-loop goals)")
@@ -50,25 +51,32 @@ def register(commands, groups) -> None:
 
 
 def run_feasible(args) -> int:
-    import dataclasses
     import sys
     from pathlib import Path
 
     from motok_robot.errors import InputError
-    from motok_robot.feasibility.config import BalanceConfig, FeasibilityConfig, GaitConfig, RefineConfig
+    from motok_robot.feasibility.config import robot_config
     from motok_robot.sim.cli import _robot_for
 
-    refine = RefineConfig()
+    # only what was asked for: the rest comes from the robot's description, else the defaults
+    settings: dict = {"gait": {"enabled": True}} if args.own_steps else {}
+    for key, value in (("retime", args.retime), ("zmp_axes", args.zmp_axes), ("max_torque_share", args.max_torque_share)):
+        if value is not None:
+            settings[key] = value
+    if args.no_zmp_shift:
+        settings["zmp_shift"] = False
+    if args.refine:
+        settings["refine"] = True
+    if args.no_balance:
+        settings["balance"] = {"enabled": False}
+    if args.no_foothold_tracking:
+        settings.setdefault("balance", {})["foothold_gain"] = 0.0
+    if args.damping_speed_share is not None:
+        settings.setdefault("gait", {})["damping_speed_share"] = args.damping_speed_share
     if args.samples is not None:
-        refine = dataclasses.replace(refine, samples=args.samples)
+        settings.setdefault("refine_config", {})["samples"] = args.samples
     if args.horizon is not None:
-        refine = dataclasses.replace(refine, horizon_s=args.horizon)
-    config = FeasibilityConfig(retime=args.retime, zmp_shift=not args.no_zmp_shift, zmp_axes=args.zmp_axes,
-                               max_torque_share=args.max_torque_share, refine=args.refine,
-                               balance=BalanceConfig(enabled=not args.no_balance,
-                                                     foothold_gain=0.0 if args.no_foothold_tracking else 1.0),
-                               refine_config=refine,
-                               gait=GaitConfig(enabled=args.own_steps, damping_speed_share=args.damping_speed_share))
+        settings.setdefault("refine_config", {})["horizon_s"] = args.horizon
     path = Path(args.input)
     if not path.is_file():
         raise InputError(f"{path}: file not found")
@@ -80,12 +88,13 @@ def run_feasible(args) -> int:
     trajectory = read_robot_npz(path)
     if len(trajectory.joint_names) != index.nj or list(trajectory.joint_names) != list(index.joint_names):
         raise InputError(f"{path}: field 'joint_names' does not match robot '{index.name}'")
+    config = robot_config(index, settings)
 
     def progress(done, total):
         print(f"\rrefine {done:5.1f} / {total:.1f} s", end="" if sys.stdout.isatty() else "\n", flush=True)
 
-    result = make_feasible(trajectory, index, config, progress=progress if args.refine else None)
-    if args.refine and sys.stdout.isatty():
+    result = make_feasible(trajectory, index, config, progress=progress if config.refine else None)
+    if config.refine and sys.stdout.isatty():
         print()
     out = write_feasible(result, args.out, index.name)
     rec = result.record
@@ -99,7 +108,7 @@ def run_feasible(args) -> int:
              f"{walk['lead_out_s']:.1f} s)" if walk else "")
           + (f", played {slow['factor']:.2f}x slower for the servos' torque (needed {slow['torque_share_before']:.2f} "
              f"of a limit, now {slow['torque_share_after']:.2f})" if slow and slow["factor"] > 1 else ""))
-    if args.own_steps and not walk:
+    if config.gait.enabled and not walk:
         print("  --own-steps: the motion does not travel (or lifts a foot higher than a step): its legs are kept")
     print(f"  executed from rest{' with the balance controller' if result.plan is not None else ' open loop'}: "
           f"{'FELL at %.2f s' % rec['executed']['fall_time_s'] if result.fell else 'stayed up'}, root "

@@ -176,6 +176,7 @@ class GaitConfig:
     #: takes this share of the torque limit (the identified OP3 at 0.75: 4.1 / 1.084 x 0.75 =
     #: 2.8 rad/s); 0: off.  Measured at 0.75: real walks passing on the OP3 2 -> 10 of 31,
     #: on op3_like 19 -> 10 (the bounded legs miss their footholds), so it is off by default
+    #: and set per robot (op3.toml's ``[feasibility.gait]``)
     damping_speed_share: float = 0.0
     #: the ZMP target of a stance foot lies this far (per leg length) outward of its sole centre
     #: (0.04 on op3_like = 1 cm): the CoM then stands over the stance foot where its sway turns
@@ -248,3 +249,60 @@ class FeasibilityConfig:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+    def with_settings(self, settings: dict, source: str) -> "FeasibilityConfig":
+        """This config with ``settings`` applied: a dict of field names (``gait``, ``balance`` and
+        ``refine_config`` as nested dicts, the balance gains merged per joint role), the layout
+        of a robot description's ``[feasibility]`` table.  ``source`` names where they come from
+        in messages (``"op3.toml"``)."""
+        return _with_settings(self, settings, source, "feasibility")
+
+
+def _with_settings(config, settings, source: str, table: str):
+    """``config`` (a config dataclass) with ``settings`` merged in; InputError naming ``source``,
+    the ``table`` and the key for an unknown key or a value of the wrong kind."""
+    where = f"{source}: [{table}]"
+    if not isinstance(settings, dict):
+        raise InputError(f"{where} expected a table of settings, got {type(settings).__name__}")
+    fields = {f.name for f in dataclasses.fields(config)}
+    unknown = sorted(set(settings) - fields)
+    if unknown:
+        raise InputError(f"{where} unknown setting(s) {', '.join(unknown)}; known: {', '.join(sorted(fields))}")
+    changes = {}
+    for key, value in settings.items():
+        current = getattr(config, key)
+        if dataclasses.is_dataclass(current):
+            changes[key] = _with_settings(current, value, source, f"{table}.{key}")
+        elif isinstance(current, dict):
+            if not isinstance(value, dict):
+                raise InputError(f"{where} {key}: expected a table, got {type(value).__name__}")
+            changes[key] = {**current, **value}
+        elif isinstance(current, bool) or isinstance(value, bool):
+            if not (isinstance(current, bool) and isinstance(value, bool)):
+                raise InputError(f"{where} {key} = {value!r}: expected {type(current).__name__}")
+            changes[key] = value
+        elif isinstance(current, (int, float)):
+            if not isinstance(value, (int, float)):
+                raise InputError(f"{where} {key} = {value!r}: expected a number")
+            if isinstance(current, int) and not float(value).is_integer():
+                raise InputError(f"{where} {key} = {value!r}: expected a whole number")
+            changes[key] = type(current)(value)
+        elif not isinstance(value, type(current)):
+            raise InputError(f"{where} {key} = {value!r}: expected {type(current).__name__}")
+        else:
+            changes[key] = value
+    try:
+        return dataclasses.replace(config, **changes)
+    except InputError as exc:
+        raise InputError(f"{where} {exc}") from None
+
+
+def robot_config(index, settings: dict | None = None) -> FeasibilityConfig:
+    """The stage's settings for robot ``index`` (a RobotIndex): the defaults, then the robot
+    description's ``[feasibility]`` table, then ``settings`` (what a user asked for, the same
+    layout)."""
+    config = FeasibilityConfig()
+    own = getattr(index, "feasibility_settings", None) or {}
+    if own:
+        config = config.with_settings(own, getattr(index, "description_file", "") or f"robot {index.name}")
+    return config.with_settings(settings, "feasibility settings") if settings else config

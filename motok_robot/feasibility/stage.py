@@ -36,7 +36,7 @@ import mujoco
 import numpy as np
 
 from motok_robot.feasibility.balance import BalancePlan, build_plan
-from motok_robot.feasibility.config import FeasibilityConfig
+from motok_robot.feasibility.config import FeasibilityConfig, robot_config
 from motok_robot.feasibility.dynamics import required_torque
 from motok_robot.feasibility.footsteps import RobotFeet, plan_steps, stance_offsets, time_warp_for
 from motok_robot.feasibility.gait import generate_gait
@@ -193,13 +193,14 @@ def walk_task(trajectory, index, config, record: dict):
 
 def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, progress=None) -> FeasibleResult:
     """Run the stage on ``trajectory`` (a :class:`retarget.io.RobotTrajectory`) for robot ``index``
-    (a :class:`~motok_robot.robots.index.RobotIndex`)."""
+    (a :class:`~motok_robot.robots.index.RobotIndex`), with ``config`` (default: the robot's
+    settings, :func:`~motok_robot.feasibility.config.robot_config`)."""
     from retarget.retime import retime
 
-    config = config or FeasibilityConfig()
+    config = config if config is not None else robot_config(index)
     started = time.perf_counter()
     timing = {}
-    record: dict = {"config": config.to_dict()}
+    record: dict = {"config": config.to_dict(), "robot_settings": dict(getattr(index, "feasibility_settings", {}))}
     if config.retime > 1.0:
         trajectory = retime(trajectory, config.retime)
     record["time_warp"] = float(trajectory.retime_factor)

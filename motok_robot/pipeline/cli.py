@@ -233,8 +233,9 @@ def constraint_arguments(args: argparse.Namespace, seconds: float | None):
 
 
 def feasibility_config(args: argparse.Namespace):
-    """The feasibility stage's settings from ``--feasible`` / ``--feasible-retime`` /
-    ``--feasible-own-steps`` (None: off)."""
+    """The feasibility stage's settings asked for by ``--feasible`` / ``--feasible-retime`` /
+    ``--feasible-own-steps``, as a dict applied over the robot's own settings
+    (:func:`motok_robot.feasibility.config.robot_config`); None: off."""
     if not args.feasible:
         for flag, used in (("--feasible-retime", args.feasible_retime != 1.0),
                            ("--feasible-own-steps", getattr(args, "feasible_own_steps", False))):
@@ -243,7 +244,7 @@ def feasibility_config(args: argparse.Namespace):
 
                 raise InputError(f"{flag} needs --feasible")
         return None
-    from motok_robot.feasibility.config import FeasibilityConfig, GaitConfig
-
-    return FeasibilityConfig(retime=args.feasible_retime,
-                             gait=GaitConfig(enabled=bool(getattr(args, "feasible_own_steps", False))))
+    settings: dict = {"retime": args.feasible_retime} if args.feasible_retime != 1.0 else {}
+    if getattr(args, "feasible_own_steps", False):
+        settings["gait"] = {"enabled": True}
+    return settings

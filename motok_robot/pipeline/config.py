@@ -41,8 +41,10 @@ class PipelineConfig:
             comes next), are a strict subset of those the first one failed; otherwise the first
             is kept.  Clips that pass (most gestures) never pay for the slower ZMP solve.  0 =
             never re-solve.
-        feasibility: a :class:`motok_robot.feasibility.config.FeasibilityConfig` to run the
-            feasibility stage after retargeting (docs/feasibility.md): the robot trajectory
+        feasibility: the feasibility stage's settings, to run it after retargeting
+            (docs/feasibility.md): a :class:`motok_robot.feasibility.config.FeasibilityConfig`
+            (used as it is) or a dict of settings applied over the robot's own
+            (:func:`motok_robot.feasibility.config.robot_config`; ``{}``: the robot's): the robot trajectory
             becomes the one the robot executes closed loop, judged against the retargeted one,
             and the balance repair and the slow-down are not tried (the stage owns timing and
             balance).  None (default): retargeting's trajectory is validated as it is, with the
@@ -50,7 +52,7 @@ class PipelineConfig:
         walk_own_steps: with no ``feasibility`` given, a motion that travels (both feet cover
             more than half a leg length and neither rises high:
             :func:`motok_robot.feasibility.stage.walks`) goes through the feasibility stage with
-            the robot's own steps along its path (``GaitConfig(enabled=True)``) instead of the two
+            the robot's own steps along its path (the robot's settings with ``gait.enabled``) instead of the two
             repairs: the human's stride topples a small humanoid, its own steps do not
             (docs/feasibility.md).  Motions on the spot are validated as retargeted, with the
             repairs.  False: every motion is validated as retargeted.

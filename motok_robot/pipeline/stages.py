@@ -178,23 +178,27 @@ def walk_config(cfg, entry: dict, trajectory):
     when ``cfg.walk_own_steps`` and the retargeted ``trajectory`` travels, else None."""
     if not cfg.walk_own_steps:
         return None
-    from motok_robot.feasibility.config import FeasibilityConfig, GaitConfig
+    from motok_robot.feasibility.config import robot_config
     from motok_robot.feasibility.footsteps import RobotFeet
     from motok_robot.feasibility.stage import walks
 
-    config = FeasibilityConfig(gait=GaitConfig(enabled=True))
     index = entry["index"]
+    config = robot_config(index, {"gait": {"enabled": True}})
     return config if walks(index, trajectory.qpos, RobotFeet(index), config.gait) else None
 
 
 def feasible(config, entry: dict, files: dict, tmp: Path, notes: list) -> dict:
-    """Run the feasibility stage (``config``: its ``FeasibilityConfig``) on ``files["robot"]``
-    (rewritten as the executed trajectory, with ``servo_goals.npz`` and ``feasibility.json``
-    beside it); returns the servo goals."""
+    """Run the feasibility stage (``config``: its ``FeasibilityConfig``, or a dict of settings
+    over the robot's own) on ``files["robot"]`` (rewritten as the executed trajectory, with
+    ``servo_goals.npz`` and ``feasibility.json`` beside it); returns the servo goals."""
     from retarget.io import read_robot_npz
 
+    from motok_robot.feasibility.config import robot_config
     from motok_robot.feasibility.feedforward import load_servo_goals
     from motok_robot.feasibility.stage import RECORD_FILE, make_feasible, write_feasible
+
+    if isinstance(config, dict):
+        config = robot_config(entry["index"], config)
 
     result = make_feasible(read_robot_npz(files["robot"]), entry["index"], config)
     write_feasible(result, tmp, entry["robot"].name)

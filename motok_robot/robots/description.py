@@ -141,6 +141,10 @@ class RobotDescription:
     servos: list[ServoSpec] = field(default_factory=list)
     bus: BusSpec | None = None
     velocity_limits: dict[str, float] = field(default_factory=dict)  # joint (or "default") -> rad/s
+    #: the feasibility stage's settings for this robot (the ``[feasibility]`` table: fields of
+    #: ``FeasibilityConfig``, nested tables for ``gait``, ``balance``, ``refine_config``); they are
+    #: checked where the stage reads them (``motok_robot.feasibility.config.robot_config``)
+    feasibility: dict[str, Any] = field(default_factory=dict)
 
     def servo_for(self, joint: str) -> ServoSpec | None:
         """The servo driving ``joint``, or None."""
@@ -368,6 +372,7 @@ def parse_description(path: str | Path) -> RobotDescription:
         servos=servos,
         bus=bus,
         velocity_limits=velocity_limits,
+        feasibility=r.table(data, "feasibility", "", required=False),
     )
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -54,6 +55,8 @@ class RobotIndex:
     mjcf_path: object = None    # Path of the MJCF the model was compiled from (None: built in memory)
     description_sha256: str | None = None  # digest of the description (TOML + MJCF bytes), Robot.description_sha256
     ignored_body_pairs: set = field(default_factory=set)  # self-collision pairs touching at nominal
+    feasibility_settings: dict = field(default_factory=dict)  # the description's [feasibility] table
+    description_file: str = ""  # the description's file name, for messages ("op3.toml")
 
     @property
     def nj(self) -> int:
@@ -123,6 +126,10 @@ def index_robot(robot) -> RobotIndex:
         nominal_qpos=nominal, height_m=height, total_mass=float(kin_model.body_subtreemass[root_body]),
         mjcf_path=getattr(robot, "mjcf_path", None),
         description_sha256=getattr(robot, "description_sha256", None))
+    description = getattr(robot, "description", None)
+    if description is not None:
+        index.feasibility_settings = dict(description.feasibility)
+        index.description_file = Path(description.path).name
     index.ignored_body_pairs = collision.touching_body_pairs(collision_model, nominal)
     return index
 
