@@ -156,6 +156,24 @@ def test_the_walks_joints_stay_below_the_speed_their_damping_allows(op3):
     assert speed(bounded) <= 1.0 + 1e-6
 
 
+def test_the_walks_base_height_leaves_out_the_human_pelvis_bob(op3):
+    """A reference whose pelvis bobs 1 cm at a human's step period: the robot's base keeps the
+    mean height and a slow change of it, not the bob."""
+    qpos = _gliding(op3, 6.0, 0.06)
+    t = np.arange(len(qpos)) / FPS
+    slow = 0.01 * np.clip((t - 3.0) / 2.0, 0.0, 1.0)  # a 1 cm dip over 2 s, kept
+    qpos[:, 2] += 0.005 * np.sin(2 * np.pi * t / 0.55) - slow
+    schedule = plan_steps(op3, qpos, FPS, first_step_frame=12)
+    kept = generate_gait(op3, qpos, FPS, schedule)
+    smooth = generate_gait(op3, qpos, FPS, schedule, height_window_s=1.0)
+    inner = slice(int(1.5 * FPS), int(5.5 * FPS))
+    bob = lambda z: np.abs(np.diff(z[inner], 2)).max() * FPS ** 2  # noqa: E731  (vertical acceleration)
+    assert bob(smooth.qpos[:, 2]) < 0.25 * bob(kept.qpos[:, 2])
+    dip = smooth.qpos[int(1.5 * FPS), 2] - smooth.qpos[-1, 2]
+    assert 0.007 < dip < 0.013  # the slow change is followed
+    assert np.median(smooth.foot_errors) < 0.002
+
+
 def test_only_a_motion_that_goes_somewhere_is_walked(op3):
     feet, config = RobotFeet(op3), GaitConfig()
     assert walks(op3, S.walk(op3, steps=6, step_period_s=1.0, fps=FPS), feet, config)

@@ -82,6 +82,7 @@ def run_feasible(args) -> int:
         raise InputError(f"{path}: file not found")
     from retarget.io import read_robot_npz
 
+    from motok_robot.feasibility.clearance import clearance_note
     from motok_robot.feasibility.stage import make_feasible, write_feasible
 
     index = _robot_for(path, args.robot, {})
@@ -106,6 +107,7 @@ def run_feasible(args) -> int:
              f"{shift['zmp_outside_before']:.0%} -> {shift['zmp_outside_after']:.0%} of support frames)" if shift else "")
           + (f", walked with {walk['steps']} steps of its own (lead-in {walk['lead_in_s']:.1f} s, lead-out "
              f"{walk['lead_out_s']:.1f} s)" if walk else "")
+          + clearance_note((walk or {}).get("arm_clearance"))
           + (f", played {slow['factor']:.2f}x slower for the servos' torque (needed {slow['torque_share_before']:.2f} "
              f"of a limit, now {slow['torque_share_after']:.2f})" if slow and slow["factor"] > 1 else ""))
     if config.gait.enabled and not walk:

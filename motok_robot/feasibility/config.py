@@ -178,6 +178,14 @@ class GaitConfig:
     #: on op3_like 19 -> 10 (the bounded legs miss their footholds), so it is off by default
     #: and set per robot (op3.toml's ``[feasibility.gait]``)
     damping_speed_share: float = 0.0
+    #: the base height is the reference's smoothed over this many seconds of the source (a Hann
+    #: window; the time warp stretches it): a human pelvis bobs with each of the human's own
+    #: steps, out of phase with the robot's, and a stance knee lifting the OP3 by that bob at
+    #: 2.3 rad/s spent the servo's whole torque; 0: the reference's height as it is
+    height_smoothing_s: float = 1.0
+    #: the arms are moved (by their own joints) where they come closer than this (per robot
+    #: height; 0.02 = 1 cm on the OP3) to the legs the walk planned (:mod:`.clearance`); 0: off
+    arm_clearance_per_height: float = 0.02
     #: the ZMP target of a stance foot lies this far (per leg length) outward of its sole centre
     #: (0.04 on op3_like = 1 cm): the CoM then stands over the stance foot where its sway turns
     zmp_outward_per_leg: float = 0.04
@@ -199,7 +207,8 @@ class GaitConfig:
                                      ("zmp_transfer_share", 0.1, 1.0),
                                      ("advance_per_leg", 0.02, 1.0), ("turn_per_step_rad", 0.0, 1.0),
                                      ("clearance_per_leg", 0.0, 0.5), ("vertical_share", 0.0, 0.45),
-                                     ("damping_speed_share", 0.0, 1.0),
+                                     ("damping_speed_share", 0.0, 1.0), ("arm_clearance_per_height", 0.0, 0.1),
+                                     ("height_smoothing_s", 0.0, 5.0),
                                      ("zmp_outward_per_leg", 0.0, 0.2), ("lead_in_s", 0.0, 5.0),
                                      ("lead_out_s", 0.0, 5.0), ("max_time_warp", 1.0, 4.0),
                                      ("min_travel_per_leg", 0.0, 10.0), ("max_lift_per_leg", 0.0, 2.0)))

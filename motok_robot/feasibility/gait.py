@@ -11,7 +11,8 @@ robot's balance depends on, as a biped walking pattern generator does:
 2. **A CoM path for it**: the horizontal CoM minimising the cart-table ZMP error plus its jerk,
    a banded least-squares problem over the whole clip at ``rate_hz`` (the non-causal form of
    ZMP preview control), starting and ending at rest (:func:`com_path`).
-3. **The whole body**: the base keeps the reference's height and tilt and is moved
+3. **The whole body**: the base keeps the reference's height (smoothed over about a human step:
+   the pelvis bobs with the human's own steps) and tilt and is moved
    horizontally until the robot's CoM is on that path, lowered where a leg could not reach its
    foot; each leg is solved for its foot pose within the servos' velocity limits (damped least
    squares, :func:`~motok_robot.feasibility.zmp_shift.solve_legs`); arms, head and torso joints
@@ -77,6 +78,17 @@ def _hips_and_reach(index, legs, margin: float = 0.97):
         hips.append(hip)
         reach.append(margin * float(np.linalg.norm(data.xanchor[hip] - data.xpos[index.sole_body[k]])))
     return hips, reach
+
+
+def smoothed(values: np.ndarray, width: int) -> np.ndarray:
+    """[T] ``values`` smoothed by a Hann window ``width`` frames wide (edges held)."""
+    if width < 3:
+        return np.asarray(values, dtype=np.float64).copy()
+    kernel = np.hanning(width + 2)[1:-1]
+    kernel /= kernel.sum()
+    half = width // 2
+    padded = np.pad(np.asarray(values, dtype=np.float64), (half, width - 1 - half), mode="edge")
+    return np.convolve(padded, kernel, mode="valid")
 
 
 def com_path(zmp: np.ndarray, height: float, dt: float, start: np.ndarray, end: np.ndarray,
@@ -146,15 +158,20 @@ def generate_gait(index, qpos: np.ndarray, fps: float, schedule: StepSchedule, *
                   jerk_weight: float = 1e-7, passes: int = 6, reach_window_s: float = 0.1,
                   max_drop_fraction: float = 0.2, velocity_fraction: float = 0.9,
                   speed_limit: np.ndarray | None = None,
-                  base_yaw: np.ndarray | None = None, zmp_transfer_share: float = 1.0) -> GaitResult:
+                  base_yaw: np.ndarray | None = None, zmp_transfer_share: float = 1.0,
+                  height_window_s: float = 0.0) -> GaitResult:
     """The task trajectory [T, nq] walking ``schedule`` with the upper body, base height and
     orientation of reference ``qpos`` [T, nq] at ``fps`` (see the module docstring); with
     ``base_yaw`` [T] (rad) the base turns with it instead of the reference's (a human's pelvis
-    swings its heading with every step; on a robot's stance foot that swing is a twist);
+    swings its heading with every step; on a robot's stance foot that swing is a twist); with
+    ``height_window_s`` > 0 the base height is the reference's smoothed over that window (a
+    human's pelvis also bobs with every one of its steps, which the robot's steps do not share);
     ``zmp_transfer_share``: see :func:`zmp_reference`."""
     qpos = np.asarray(qpos, dtype=np.float64).copy()
     if base_yaw is not None:
         qpos[:, 3:7] = with_yaw(qpos[:, 3:7], base_yaw)
+    if height_window_s > 0:
+        qpos[:, 2] = smoothed(qpos[:, 2], int(round(height_window_s * fps)))
     T = qpos.shape[0]
     foot_pos, foot_quat = schedule.foot_pos, schedule.foot_quat
     com = _com(index, qpos)

@@ -36,6 +36,7 @@ import mujoco
 import numpy as np
 
 from motok_robot.feasibility.balance import BalancePlan, build_plan
+from motok_robot.feasibility.clearance import keep_arms_clear
 from motok_robot.feasibility.config import FeasibilityConfig, robot_config
 from motok_robot.feasibility.dynamics import required_torque
 from motok_robot.feasibility.footsteps import RobotFeet, plan_steps, stance_offsets, time_warp_for
@@ -183,12 +184,16 @@ def walk_task(trajectory, index, config, record: dict):
                           first_foot=first_lifted_foot(contacts), feet=feet, offsets=offsets,
                           lift_share=gait.vertical_share, zmp_outward_per_leg=gait.zmp_outward_per_leg)
     walk = generate_gait(index, reference, fps, schedule, base_yaw=schedule.heading,
-                         zmp_transfer_share=gait.zmp_transfer_share,
+                         zmp_transfer_share=gait.zmp_transfer_share, height_window_s=gait.height_smoothing_s * warp,
                          speed_limit=damping_speed_limit(index, gait.damping_speed_share)
                          if gait.damping_speed_share > 0 else None)
     record["gait"] = {"time_warp": warp, "lead_in_s": before / fps, "lead_out_s": round(gait.lead_out_s * fps) / fps,
                       **schedule.record(), **walk.record()}
-    return trajectory, walk.qpos, walk.contacts, schedule.loaded
+    task = walk.qpos
+    if gait.arm_clearance_per_height > 0:  # the reference's arms swing with the human's legs, not these
+        task, record["gait"]["arm_clearance"] = keep_arms_clear(index, task, fps,
+                                                                gait.arm_clearance_per_height * index.height_m)
+    return trajectory, task, walk.contacts, schedule.loaded
 
 
 def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, progress=None) -> FeasibleResult:

@@ -193,6 +193,7 @@ def feasible(config, entry: dict, files: dict, tmp: Path, notes: list) -> dict:
     ``servo_goals.npz`` and ``feasibility.json`` beside it); returns the servo goals."""
     from retarget.io import read_robot_npz
 
+    from motok_robot.feasibility.clearance import clearance_note
     from motok_robot.feasibility.config import robot_config
     from motok_robot.feasibility.feedforward import load_servo_goals
     from motok_robot.feasibility.stage import RECORD_FILE, make_feasible, write_feasible
@@ -209,6 +210,7 @@ def feasible(config, entry: dict, files: dict, tmp: Path, notes: list) -> dict:
                  + (f", CoM moved up to {shift['com_shift_m_max'] * 100:.1f} cm" if shift else "")
                  + (f", walked with {rec['gait']['steps']} steps of its own (standing {rec['gait']['lead_in_s']:.1f} s "
                     f"before and {rec['gait']['lead_out_s']:.1f} s after)" if "gait" in rec else "")
+                 + clearance_note(rec.get("gait", {}).get("arm_clearance"))
                  + (f", {rec['torque_retime']['factor']:.2f}x of it for the servos' torque"
                     if (rec.get("torque_retime") or {}).get("factor", 1.0) > 1 else "")
                  + (f", goals refined ({rec['refine']['rollouts']} rollouts)" if "refine" in rec else "")
