@@ -110,7 +110,7 @@ def _spread(values: np.ndarray, window: int) -> np.ndarray:
 
 
 def keep_arms_clear(index, qpos: np.ndarray, fps: float, clearance_m: float, *, window_s: float = 0.25,
-                    iterations: int = 8, passes: int = 3) -> tuple[np.ndarray, dict]:
+                    iterations: int = 8, passes: int = 10) -> tuple[np.ndarray, dict]:
     """``qpos`` [T, nq] with the arms moved where they come closer than ``clearance_m`` to the
     legs, and a record: frames that needed it before and after, the largest joint correction
     (rad), the closest approach before and after (m)."""
