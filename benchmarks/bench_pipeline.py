@@ -73,7 +73,9 @@ def _profile(fn, top: int = 20) -> str:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--robot", default="op3_like")
+    from motok_robot.robots.robot import DEFAULT_ROBOT
+
+    parser.add_argument("--robot", default=DEFAULT_ROBOT, help=f"default {DEFAULT_ROBOT}, the pipeline's")
     parser.add_argument("--seconds", type=float, default=6.0)
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--threads", type=int, default=2, help="torch threads for generation (default 2)")

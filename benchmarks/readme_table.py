@@ -37,22 +37,28 @@ MODELS = REPO_ROOT / "models"
 ROBOT_EIGHT = "robot_eight.json"
 #: the same prompts over seeds 0-4 (optional: the row is left out without it)
 ROBOT_SEEDS = "robot_eight_seeds0-4.json"
+#: the same on robots other than the default, by robot (optional rows)
+ROBOT_SEEDS_OTHER = {"op3_like": "robot_eight_seeds0-4_op3_like.json"}
 GENERATION = {"masked": "generation_masked.json", "ar": "generation_ar.json"}
 BEHAVIOUR = ("planner_behaviour.json", "planner_behaviour_seeds48-95.json")
 RECONSTRUCTION = {"val split": "reconstruct_val.json", "test split": "reconstruct_test.json",
                   "acRNN (never seen)": "reconstruct_acrnn.json"}
 DATA = {"training sources": "data_prepare.json", "acRNN": "data_prepare_acrnn.json"}
-FEASIBILITY = "feasibility_mocap_op3_like.json"
+FEASIBILITY = {robot: f"feasibility_mocap_{robot}.json" for robot in ("op3", "op3_like")}
+#: what each variant of the real-mocap benchmark adds (benchmarks/feasibility_mocap.py)
+FEASIBILITY_VARIANTS = {"A": "retargeted", "B": "+ `feasible`", "C": "+ `feasible` 1.5x slower",
+                        "D": "+ `feasible --own-steps`"}
 GENERATE_SPEED = "bench_generate.json"
 RETARGET = "retarget.json"
 VALIDATE = "bench_validate.json"
 PLAYBACK = {"SCHED_FIFO": "bench_playback_fifo.json", "normal priority": "bench_playback.json"}
+WRITTEN_BY_SEEDS = ("motok-robot run --prompts examples/prompts_eight.txt --seed S --no-render --no-plots --out OUT_S "
+                    "for S in 0-4, then readme_table.import_batches([OUT_0, ..., OUT_4], ...) (or ship_gate.py)")
 #: the command that writes each source (printed by the ``sources`` table and named when one is missing)
 WRITTEN_BY = {
     ROBOT_EIGHT: "motok-robot run --prompts examples/prompts_eight.txt --no-render --out OUT, then "
                  "python benchmarks/readme_table.py --import-batch OUT",
-    ROBOT_SEEDS: "motok-robot run --prompts examples/prompts_eight.txt --seed S --no-render --no-plots --out OUT_S "
-                 "for S in 0-4, then readme_table.import_batches([OUT_0, ..., OUT_4], ...) (or ship_gate.py)",
+    ROBOT_SEEDS: WRITTEN_BY_SEEDS,
     **{name: f"motok-robot eval generation --data runs/prepared --planner {kind} --repeats 5 --mm-texts 20 "
              f"--mm-repeats 10 --no-train-reference --json benchmarks/results/{name}" for kind, name in GENERATION.items()},
     BEHAVIOUR[0]: "python benchmarks/planner_behaviour.py --seeds 48 --data runs/prepared",
@@ -67,7 +73,8 @@ WRITTEN_BY = {
     DATA["training sources"]: "the summary.json of motok-robot data prepare --source bandai=... --source cmu=... "
                               "--source deepmimic=... --out runs/prepared",
     DATA["acRNN"]: "the summary.json of motok-robot data prepare --source acrnn=... --out runs/prepared_acrnn",
-    FEASIBILITY: "python benchmarks/feasibility_mocap.py --robots op3_like",
+    **{name: f"python benchmarks/feasibility_mocap.py --robots {robot}" for robot, name in FEASIBILITY.items()},
+    **{name: WRITTEN_BY_SEEDS.replace("--seed S", f"--seed S --robot {robot}") for robot, name in ROBOT_SEEDS_OTHER.items()},
     GENERATE_SPEED: "python benchmarks/bench_generate.py --planner masked",
     RETARGET: "python benchmarks/bench_retarget.py",
     VALIDATE: "python benchmarks/bench_validate.py --robot all --no-render",
@@ -242,27 +249,59 @@ def source(*names: str) -> str:
     return ", ".join(f"`{n}`" for n in names)
 
 
+def robot_of(rows: list[dict]) -> str:
+    """The robot of a prompt batch's rows (files written before rows named it: op3_like)."""
+    robots = sorted({r.get("robot") or "op3_like" for r in rows})
+    if len(robots) != 1:
+        raise SourceError(f"the rows of one robot benchmark name several robots: {', '.join(robots)}")
+    return robots[0]
+
+
+def seeds_row(data: dict, name: str) -> tuple:
+    """The row of the 8 prompts over several seeds on one robot."""
+    cells = data["rows"]
+    seeds = sorted({int(r["seed"]) for r in cells})
+    per_prompt = {}
+    for r in cells:
+        per_prompt[r["text"]] = per_prompt.get(r["text"], 0) + truthy(r.get("passed"))
+    worst = ", ".join(f"{_short(t)} {n}/{len(seeds)}" for t, n in per_prompt.items() if n < len(seeds))
+    return (f"text → robot, `{robot_of(cells)}`", f"the same prompts over seeds {seeds[0]}-{seeds[-1]}, every default",
+            f"**{sum(truthy(r.get('passed')) for r in cells)} of {len(cells)}**"
+            + (f" (fewer than every seed: {worst})" if worst else ""),
+            measured_on(data, with_load=False), source(name))
+
+
+def feasibility_row(data: dict, robot: str, name: str) -> tuple:
+    """The row of the real-mocap benchmark on one robot: passing (falls) per variant and group."""
+    summary = {(r["group"], r["variant"][0]): r for r in data["summary"]}
+    variants = [v for v in FEASIBILITY_VARIANTS if ("locomotion", v) in summary]
+    loco = [summary[("locomotion", v)] for v in variants]
+    other = [summary[("other", v)] for v in variants]
+    return (f"real mocap → robot, `{robot}`", f"{loco[0]['clips']} locomotion / {other[0]['clips']} other clips "
+            "passing (falls): " + " / ".join(FEASIBILITY_VARIANTS[v] for v in variants),
+            " / ".join(f"{r['passed']} ({r['fell']})" for r in loco) + " and " + " / ".join(str(r["passed"]) for r in other),
+            measured_on(newest_machine(data)), source(name))
+
+
+def newest_machine(data: dict) -> dict:
+    """``data`` with the latest of its machine descriptions as ``machine``: a file whose variants
+    were measured at different times keeps each run's in ``machine_<VARIANT>``."""
+    machines = [m for k, m in data.items() if (k == "machine" or k.startswith("machine_")) and isinstance(m, dict)]
+    return {**data, "machine": max(machines, key=lambda m: str(m.get("date_utc", "")), default={})}
+
+
 def table_readme(results: Path, shipped: dict[str, str]) -> str:
     rows = []
     robot_data, robot = robot_rows(results)
     passed = [r for r in robot if truthy(r.get("passed"))]
     fails = ", ".join(_short(r["text"]) for r in robot if not truthy(r.get("passed")))
-    rows.append(("text → robot, `op3_like`", f"the {len(robot)} prompts of `examples/prompts_eight.txt`, seed 0, "
-                 "every default: clips passing every check",
+    rows.append((f"text → robot, `{robot_of(robot)}`", f"the {len(robot)} prompts of `examples/prompts_eight.txt`, "
+                 "seed 0, every default: clips passing every check",
                  f"**{len(passed)} of {len(robot)}**" + (f" (failing: {fails})" if fails else ""),
                  measured_on(robot_data, with_load=False), source(ROBOT_EIGHT)))
-    if (results / ROBOT_SEEDS).is_file():
-        seeds_data = load(ROBOT_SEEDS, results)
-        cells = seeds_data["rows"]
-        seeds = sorted({int(r["seed"]) for r in cells})
-        per_prompt = {}
-        for r in cells:
-            per_prompt[r["text"]] = per_prompt.get(r["text"], 0) + truthy(r.get("passed"))
-        worst = ", ".join(f"{_short(t)} {n}/{len(seeds)}" for t, n in per_prompt.items() if n < len(seeds))
-        rows.append(("text → robot, `op3_like`", f"the same prompts over seeds {seeds[0]}-{seeds[-1]}, every default",
-                     f"**{sum(truthy(r.get('passed')) for r in cells)} of {len(cells)}**"
-                     + (f" (fewer than every seed: {worst})" if worst else ""),
-                     measured_on(seeds_data, with_load=False), source(ROBOT_SEEDS)))
+    for name in (ROBOT_SEEDS, *ROBOT_SEEDS_OTHER.values()):
+        if (results / name).is_file():
+            rows.append(seeds_row(load(name, results), name))
     reference, planners = generation_rows(results, shipped)
     real = reference.get("real (test)")
     for kind, row in planners.items():
@@ -281,15 +320,9 @@ def table_readme(results: Path, shipped: dict[str, str]) -> str:
     rows.append(("tokenizer", "whole-clip joint error after root alignment (MPJPE), val / test / acRNN (never seen)",
                  " / ".join(f"{d['mpjpe_root_aligned_cm']:.2f} cm" for d in recon.values()),
                  measured_on(recon["val split"]), source(*RECONSTRUCTION.values())))
-    feas = load(FEASIBILITY, results)
-    summary = {(r["group"], r["variant"][0]): r for r in feas["summary"]}
-    loco = [summary[("locomotion", v)] for v in "ABCD"]
-    other = [summary[("other", v)] for v in "ABCD"]
-    passed_fell = " / ".join(f"{r['passed']} ({r['fell']})" for r in loco)
-    rows.append(("real mocap → robot, `op3_like`", f"{loco[0]['clips']} locomotion / {other[0]['clips']} other clips "
-                 "passing (falls): retargeted / + `feasible` / + `feasible` 1.5x slower / + `feasible --own-steps`",
-                 f"{passed_fell} and {' / '.join(str(r['passed']) for r in other)}",
-                 measured_on(feas), source(FEASIBILITY)))
+    for robot, name in FEASIBILITY.items():
+        if robot == "op3_like" or (results / name).is_file():
+            rows.append(feasibility_row(load(name, results), robot, name))
     gen = load(GENERATE_SPEED, results)
     require_shipped(gen.get("model", ""), gen.get("planner", "masked"), GENERATE_SPEED, shipped)
     longest = max(gen["rows"], key=lambda r: r["seconds"])
@@ -539,7 +572,8 @@ def import_batches(folders: list[Path], out: Path, code: str | None = None) -> P
         for record in records:
             result = json.loads(record.read_text(encoding="utf-8"))
             times = result.get("timings_s") or {}
-            rows.append({"text": result["text"], "seconds": result.get("seconds"), "seed": result.get("seed"),
+            rows.append({"text": result["text"], "robot": result.get("robot"), "seconds": result.get("seconds"),
+                         "seed": result.get("seed"),
                          "folder": f"{Path(folder).name}/{record.parent.name}", "passed": bool(result["passed"]),
                          "failed_checks": ";".join(result.get("failed_checks") or []),
                          "playback": (result.get("playback") or {}).get("status"),

@@ -22,6 +22,7 @@ torch.set_num_threads(1)
 
 from motok_robot.cli import main  # noqa: E402
 from motok_robot.errors import InputError  # noqa: E402
+from motok_robot.robots import DEFAULT_ROBOT  # noqa: E402
 from motok_robot.motion.skeleton import NUM_JOINTS  # noqa: E402
 
 SECONDS = 1.6  # 32 frames: one retargeting window, a short physics rollout
@@ -139,7 +140,7 @@ def test_run_writes_every_file_and_they_parse(full_run):
     if "feasibility" in result.files:  # walked with the robot's own steps: standing added before and after
         gait = json.loads(result.files["feasibility"].read_text())["gait"]
         frames += int(round(gait["lead_in_s"] * 20)) + int(round(gait["lead_out_s"] * 20))
-    assert robot_npz.robot == "op3_like" and robot_npz.qpos.shape[0] == frames and np.isfinite(robot_npz.qpos).all()
+    assert robot_npz.robot == DEFAULT_ROBOT and robot_npz.qpos.shape[0] == frames and np.isfinite(robot_npz.qpos).all()
     report = json.loads((out / "report.json").read_text())
     validate_report_dict(report)
     assert report["passed"] == result.passed and report["failed_checks"] == result.failed_checks
@@ -267,7 +268,7 @@ def test_a_failing_stage_leaves_a_failed_folder_not_a_complete_one(pipe, tmp_pat
     def broken(*args, **kwargs):
         raise InputError("frame 7: solver exploded")
 
-    entry = pipe.robot("op3_like")
+    entry = pipe.robot(DEFAULT_ROBOT)  # the robot a run uses when not told
     monkeypatch.setattr(entry["retargeter"], "run", broken)
     out = tmp_path / "out"
     with pytest.raises(MotokError, match="retarget stage failed: frame 7: solver exploded"):
@@ -329,7 +330,7 @@ def test_forced_hardware_playback_streams_to_the_port(runs, pipe, tmp_path, monk
     def on_emulated_port(self, port, baud=2_000_000, **kwargs):
         ports.append(port)
         imu = kwargs.get("imu")  # the rig's OpenCR IMU, which the closed-loop playback reads
-        chain = emulated_chain(ServoMap.from_specs(load("op3_like").servos), baud=baud,
+        chain = emulated_chain(ServoMap.from_specs(load(DEFAULT_ROBOT).servos), baud=baud,
                                imu_id=imu.id if imu is not None else None)
         original(self, port, baud, port_handler=chain, imu=imu)
 
@@ -440,7 +441,7 @@ def test_batch_records_a_failing_prompt_and_goes_on(pipe, tmp_path, monkeypatch)
     """A library error inside a stage becomes a one-line MotokError; the list goes on."""
     from motok_robot.pipeline import PromptSpec
 
-    entry = pipe.robot("op3_like")
+    entry = pipe.robot(DEFAULT_ROBOT)  # the robot a run uses when not told
     original = entry["retargeter"].run
     calls = []
 

@@ -35,7 +35,7 @@ def names(model, obj, count):
 
 def test_both_robots_are_listed():
     assert set(ROBOTS) <= set(list_robots())
-    assert DEFAULT_ROBOT == "op3_like" and load(DEFAULT_ROBOT).servos
+    assert DEFAULT_ROBOT == "op3" and load(DEFAULT_ROBOT).servos  # the system-identified ROBOTIS OP3 (issue 44)
 
 
 def test_compiles_and_steps_without_warnings(robot):

@@ -108,12 +108,12 @@ feasible = true
 [[cells]]
 prompt = "a person bows"
 seed = 7
-robot = "op3"
+robot = "op3_like"
 [[cells]]
 motion = "stand.npz"
 """))
     assert [(c.prompt, c.motion_label, c.seed, c.robot, c.variant) for c in listed.cells] == [
-        ("a person bows", None, 7, "op3", "default"), (None, "stand.npz", 0, "op3_like", "default")]
+        ("a person bows", None, 7, "op3_like", "default"), (None, "stand.npz", 0, "op3", "default")]
     assert listed.cells[1].motion == (folder / "stand.npz").resolve()
 
 

@@ -5,7 +5,7 @@ The Python API behind ``motok-robot run`` (docs/pipeline.md)::
     from motok_robot import Pipeline
 
     pipe = Pipeline()                                   # models are loaded once, on first use
-    result = pipe.run("a person waves the right hand", robot="op3_like", seconds=6, out_dir="wave/")
+    result = pipe.run("a person waves the right hand", robot="op3", seconds=6, out_dir="wave/")
     result.passed, result.failed_checks                 # the validation verdict
     result.files["video"], result.timings["retarget"]   # paths and per-stage seconds
 

@@ -9,6 +9,7 @@ from motok_robot.errors import InputError
 from motok_robot.pipeline.request import check_out_dir, check_playback, check_robot
 from motok_robot.pipeline.result import STAGES
 from motok_robot.pipeline.summary import write_summary_csv
+from motok_robot.robots.robot import DEFAULT_ROBOT
 from motok_robot.text.prompts import PromptSpec, check_seconds, check_seed
 from motok_robot.text.validate import check_text
 
@@ -18,7 +19,7 @@ def slug(text: str, limit: int = 40) -> str:
     return re.sub(r"[^a-z0-9]+", "_", text.lower()).strip("_")[:limit].rstrip("_") or "prompt"
 
 
-def run_batch(pipe, prompts: list[PromptSpec], out_dir, robot: str = "op3_like", playback: str = "dry-run",
+def run_batch(pipe, prompts: list[PromptSpec], out_dir, robot: str = DEFAULT_ROBOT, playback: str = "dry-run",
               render: bool = False, overwrite: bool = False, progress: bool | None = None) -> Path:
     """Run every prompt with ``pipe`` (a :class:`~motok_robot.pipeline.Pipeline`) into
     ``out_dir/NNN_slug/`` and write ``out_dir/summary.csv``.

@@ -33,7 +33,7 @@ def register(commands, groups) -> None:
         epilog="Output is written to a hidden folder next to --out and renamed when every stage finished; a failed "
                "run leaves OUT.failed/ with FAILED.txt instead. See docs/pipeline.md.")
     parser.add_argument("text", nargs="?", default=None, help='the prompt, e.g. "a person waves the right hand"')
-    parser.add_argument("--robot", default=None, help="robot name or NAME.toml (default op3_like; see: robots list)")
+    parser.add_argument("--robot", default=None, help="robot name or NAME.toml (default op3, the system-identified ROBOTIS OP3; see: robots list)")
     parser.add_argument("--seconds", type=float, default=None,
                         help="clip length in seconds (default: estimated from the text; 6 with constraints)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")

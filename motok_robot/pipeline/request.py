@@ -8,6 +8,7 @@ import tempfile
 from pathlib import Path
 
 from motok_robot.errors import InputError
+from motok_robot.robots.robot import DEFAULT_ROBOT
 from motok_robot.text.prompts import check_seconds, check_seed
 from motok_robot.text.validate import check_text
 
@@ -77,7 +78,7 @@ def check_playback(playback: str, port: str | None) -> None:
         raise InputError(f"a serial port ({port}) was given with playback {playback!r}; use playback='port'")
 
 
-def check_request(text, robot="op3_like", seconds=None, seed=0, constraints=None, out_dir=None,
+def check_request(text, robot=DEFAULT_ROBOT, seconds=None, seed=0, constraints=None, out_dir=None,
                   playback="dry-run", port=None, overwrite=False, motion=None) -> dict:
     """Check a request without doing any work (no models loaded, nothing written).
 

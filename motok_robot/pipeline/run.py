@@ -15,6 +15,7 @@ from motok_robot.pipeline.request import check_request
 from motok_robot.pipeline.result import PipelineResult, relative
 from motok_robot.pipeline.stages import run_stages
 from motok_robot.pipeline.summary import write_summary
+from motok_robot.robots.robot import DEFAULT_ROBOT
 from motok_robot.text.prompts import PromptSpec
 
 _ROBOT_STAGES: dict[tuple[str, str], dict] = {}
@@ -98,7 +99,7 @@ class Pipeline:
         return self._robots[name]
 
     # ------------------------------------------------------------------ one run
-    def check(self, text, robot="op3_like", seconds=None, seed=0, constraints=None, out_dir=None,
+    def check(self, text, robot=DEFAULT_ROBOT, seconds=None, seed=0, constraints=None, out_dir=None,
               playback="dry-run", port=None, overwrite=False, motion=None) -> dict:
         """Check a request without doing any work (no models loaded, nothing written).
 
@@ -106,7 +107,7 @@ class Pipeline:
         """
         return check_request(text, robot, seconds, seed, constraints, out_dir, playback, port, overwrite, motion)
 
-    def run(self, text: str, robot: str = "op3_like", seconds: float | None = None, seed: int = 0,
+    def run(self, text: str, robot: str = DEFAULT_ROBOT, seconds: float | None = None, seed: int = 0,
             constraints=None, out_dir: str | Path = "motok_out", playback: str = "dry-run",
             port: str | None = None, force: bool = False, render: bool = True, *, control=None,
             control_path: str = "both", overwrite: bool = False, plots: bool | None = None,
@@ -191,7 +192,7 @@ class Pipeline:
         return balance_retargeter(entry, self.config.balance_zmp_weight, self.config.balance_acceleration_weight)
 
     # ------------------------------------------------------------------ many prompts
-    def run_batch(self, prompts: list[PromptSpec], out_dir, robot: str = "op3_like", playback: str = "dry-run",
+    def run_batch(self, prompts: list[PromptSpec], out_dir, robot: str = DEFAULT_ROBOT, playback: str = "dry-run",
                   render: bool = False, overwrite: bool = False, progress: bool | None = None) -> Path:
         """Run every prompt into ``out_dir/NNN_slug/`` and write ``out_dir/summary.csv``
         (:func:`~motok_robot.pipeline.batch.run_batch`).

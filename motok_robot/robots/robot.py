@@ -29,8 +29,8 @@ from motok_robot.robots.description import (
     parse_description,
 )
 
-#: the robot used when a command is not told which one (the Dynamixel-driven OP3-class humanoid)
-DEFAULT_ROBOT = "op3_like"
+#: the robot used when a command is not told which one: the system-identified ROBOTIS OP3
+DEFAULT_ROBOT = "op3"
 
 
 def models_dir() -> Path:

@@ -5,7 +5,7 @@
     prompts = ["a person waves the right hand", "a person bows"]   # and / or
     motions = ["stand.npz"]                 # motion files (paths relative to this file)
     seeds = [0, 1, 2]                       # or { start = 0, count = 10 }
-    robots = ["op3_like", "humanoid25"]
+    robots = ["op3", "op3_like"]
     time_budget_s = 600                     # per cell; a cell over it is cancelled and recorded
     plots = false                           # the validation PNGs of every cell (slow)
 
@@ -22,7 +22,7 @@ The cells are the cartesian product inputs x seeds x robots x variants, or an ex
     [[cells]]
     prompt = "a person bows"                # or motion = "stand.npz"
     seed = 3                                # default 0
-    robot = "op3"                           # default op3_like
+    robot = "op3_like"                      # default op3
     variant = "feasible"                    # default: the only variant
 
 An option is a ``run`` option spelled without the dashes (``max-retime`` or ``max_retime``):
@@ -268,12 +268,14 @@ def _variants(data: dict, where: _Where) -> dict[str, Variant]:
 
 
 def _product_cells(data: dict, variants: dict[str, Variant], where: _Where) -> list[Cell]:
+    from motok_robot.robots.robot import DEFAULT_ROBOT
+
     prompts = [_prompt(p, f"prompts[{i}]", where) for i, p in enumerate(_list(data, "prompts", where))]
     motions = [_motion(m, f"motions[{i}]", where) for i, m in enumerate(_list(data, "motions", where))]
     if not prompts and not motions:
         raise where.error("prompts", "give prompts, motions (files), or a [[cells]] list")
     seeds = _seeds(data, where)
-    robots = [_robot(r, f"robots[{i}]", where) for i, r in enumerate(_list(data, "robots", where, ["op3_like"]))]
+    robots = [_robot(r, f"robots[{i}]", where) for i, r in enumerate(_list(data, "robots", where, [DEFAULT_ROBOT]))]
     if not robots:
         raise where.error("robots", "is empty")
     for key, values in (("prompts", prompts), ("motions", [m for m, _ in motions]), ("seeds", seeds),
