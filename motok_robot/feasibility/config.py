@@ -184,7 +184,7 @@ class GaitConfig:
     #: 2.3 rad/s spent the servo's whole torque; 0: the reference's height as it is
     height_smoothing_s: float = 1.0
     #: the arms are moved (by their own joints) where they come closer than this (per robot
-    #: height; 0.02 = 1 cm on the OP3) to the legs the walk planned (:mod:`.clearance`); 0: off
+    #: height; 0.02 = 1.1 cm on the OP3) to the legs the walk planned (:mod:`.clearance`); 0: off
     arm_clearance_per_height: float = 0.02
     #: the ZMP target of a stance foot lies this far (per leg length) outward of its sole centre
     #: (0.04 on op3_like = 1 cm): the CoM then stands over the stance foot where its sway turns
