@@ -275,6 +275,6 @@ def test_run_reports_the_feasibility_stages_time_warp(tmp_path):
 
     demo = Path(__file__).resolve().parents[1] / "examples" / "wave_demo.npz"
     pipe = Pipeline(PipelineConfig(plots=False, max_retime=1.0, feasibility=FeasibilityConfig(retime=1.5)))
-    result = pipe.run(None, motion=demo, out_dir=tmp_path / "wave", render=False)
+    result = pipe.run(None, motion=demo, robot="op3_like", out_dir=tmp_path / "wave", render=False)
     assert result.retime_factor == pytest.approx(1.5)
     assert any("time warp 1.50x" in note for note in result.notes)

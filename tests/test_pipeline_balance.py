@@ -82,7 +82,7 @@ def fake_resolve(monkeypatch):
 
 def _run(tmp_path, name, **config):
     pipe = Pipeline(PipelineConfig(plots=False, max_retime=1.0, **config))
-    return pipe.run(None, motion=DEMO, out_dir=tmp_path / name, render=False)
+    return pipe.run(None, motion=DEMO, robot="op3_like", out_dir=tmp_path / name, render=False)
 
 
 def _check_report_is_for_the_file(result):
@@ -259,10 +259,10 @@ def test_a_real_walk_that_falls_is_rebalanced_and_passes(shared_datasets, tmp_pa
     motion = source.save(tmp_path / "walk.npz")
 
     plain = Pipeline(plots=False, balance_zmp_weight=0.0, walk_own_steps=False).run(
-        None, motion=motion, out_dir=tmp_path / "plain", render=False)
+        None, motion=motion, robot="op3_like", out_dir=tmp_path / "plain", render=False)
     assert "fall" in plain.failed_checks and plain.zmp_weight == 0.0
-    result = Pipeline(plots=False, walk_own_steps=False).run(None, motion=motion, out_dir=tmp_path / "balanced",
-                                                             render=False)
+    result = Pipeline(plots=False, walk_own_steps=False).run(None, motion=motion, robot="op3_like",
+                                                             out_dir=tmp_path / "balanced", render=False)
     assert result.passed, (result.failed_checks, result.notes)
     assert result.zmp_weight == PipelineConfig.balance_zmp_weight
     assert any(n.startswith("balance:") and "fall" in n for n in result.notes)
@@ -277,7 +277,7 @@ def test_a_real_walk_that_falls_is_rebalanced_and_passes(shared_datasets, tmp_pa
     assert np.array_equal(read_robot_npz(tmp_path / "repaired" / "robot.npz").qpos,
                           read_robot_npz(result.files["robot"]).qpos)
     # the default: the robot's own steps (the feasibility stage), no repair
-    walked = Pipeline(plots=False).run(None, motion=motion, out_dir=tmp_path / "walked", render=False)
+    walked = Pipeline(plots=False).run(None, motion=motion, robot="op3_like", out_dir=tmp_path / "walked", render=False)
     assert walked.files.get("feasibility") is not None and not any(n.startswith("balance:") for n in walked.notes)
     assert any("steps of its own" in n for n in walked.notes)
     assert main(["feasible", str(robot), "--own-steps", "--out", str(tmp_path / "own")]) == 0

@@ -45,8 +45,8 @@ def test_run_motion_errors_are_one_line(stand_npz, tmp_path, capsys):
 def test_playback_none_skips_the_stage_and_a_motion_file_has_no_vocabulary_check(stand_npz, tmp_path):
     from motok_robot.pipeline import Pipeline
 
-    result = Pipeline().run(None, motion=stand_npz, out_dir=tmp_path / "out", playback="none", render=False,
-                            plots=False)
+    result = Pipeline().run(None, motion=stand_npz, robot="op3_like", out_dir=tmp_path / "out", playback="none",
+                            render=False, plots=False)
     assert result.playback.status == "skipped" and "playback_log" not in result.files
     assert not (tmp_path / "out" / "playback.csv").exists()
     report = json.loads((tmp_path / "out" / "report.json").read_text())
@@ -67,8 +67,8 @@ def test_a_far_prompt_becomes_a_note_of_run_and_its_report(stand_npz, tmp_path, 
         return motion
 
     monkeypatch.setattr(stages, "generate", generate_far)
-    result = Pipeline().run(None, motion=stand_npz, out_dir=tmp_path / "out", playback="none", render=False,
-                            plots=False)
+    result = Pipeline().run(None, motion=stand_npz, robot="op3_like", out_dir=tmp_path / "out", playback="none",
+                            render=False, plots=False)
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert report["vocabulary"]["far"] is True
     assert any(n.startswith("vocabulary:") and "A person walks." in n for n in report["notes"])

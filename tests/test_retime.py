@@ -85,13 +85,13 @@ def test_pipeline_slows_a_motion_that_is_too_fast(fast_wave, tmp_path):
     from motok_robot.pipeline import SPEED_CHECKS, Pipeline, PipelineConfig
 
     strict = Pipeline(PipelineConfig(plots=False, max_retime=1.0)).run(
-        None, motion=fast_wave, out_dir=tmp_path / "strict", render=False)
+        None, motion=fast_wave, robot="op3_like", out_dir=tmp_path / "strict", render=False)
     too_fast = SPEED_CHECKS.intersection(strict.failed_checks)
     assert too_fast, f"the 3x wave should be too fast for op3_like (failed: {strict.failed_checks})"
     assert strict.retime_factor == 1.0
 
-    result = Pipeline(PipelineConfig(plots=False)).run(None, motion=fast_wave, out_dir=tmp_path / "slowed",
-                                                                 render=False)
+    result = Pipeline(PipelineConfig(plots=False)).run(None, motion=fast_wave, robot="op3_like",
+                                                       out_dir=tmp_path / "slowed", render=False)
     assert result.retime_factor > 1.0
     assert not SPEED_CHECKS.intersection(result.failed_checks)
     assert any(n.startswith("retime:") for n in result.notes)
@@ -145,7 +145,8 @@ def test_the_stages_one_by_one_give_what_run_gives_for_a_motion_too_fast(fast_wa
     from motok_robot.cli import main
     from motok_robot.pipeline import SPEED_CHECKS, Pipeline, PipelineConfig
 
-    ran = Pipeline(PipelineConfig(plots=False)).run(None, motion=fast_wave, out_dir=tmp_path / "run", render=False)
+    ran = Pipeline(PipelineConfig(plots=False)).run(None, motion=fast_wave, robot="op3_like", out_dir=tmp_path / "run",
+                                                    render=False)
     assert ran.retime_factor > 1.0  # run slowed it down
     motion, robot = ran.files["motion"], tmp_path / "robot.npz"
     assert main(["retarget", str(motion), "--robot", "op3_like", "--out", str(robot)]) == 0
