@@ -43,9 +43,9 @@ def _pose(robot, qpos):
     return d
 
 
-def test_listed_and_the_default_is_unchanged():
+def test_listed_and_the_op3_is_the_default():
     assert set(REAL) <= set(list_robots())
-    assert DEFAULT_ROBOT == "op3_like"
+    assert DEFAULT_ROBOT == "op3"
 
 
 def test_loads_with_a_complete_description(robot):
