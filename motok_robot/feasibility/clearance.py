@@ -141,8 +141,10 @@ def keep_arms_clear(index, qpos: np.ndarray, fps: float, clearance_m: float, *, 
 
     close_before, nearest_before = closest(qpos)
     correction = np.zeros_like(qpos)
-    for _ in range(passes):
-        close, _ = closest(qpos + correction)
+    close = close_before
+    for done in range(passes):
+        if done:
+            close, _ = closest(qpos + correction)
         if not close.any():
             break
         need = np.zeros_like(qpos)

@@ -90,14 +90,9 @@ class BalanceConfig:
 
     @classmethod
     def from_dict(cls, values: dict) -> "BalanceConfig":
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise InputError(f"balance settings: unknown key(s) {', '.join(unknown)}")
-        merged = cls().to_dict()
-        for key, value in values.items():
-            merged[key] = {**merged[key], **value} if isinstance(merged[key], dict) else value
-        return cls(**merged)
+        """The defaults with ``values`` merged in (the gains per joint role), as a robot's
+        ``[feasibility.balance]`` table is."""
+        return _with_settings(cls(), values, "balance settings", "balance")
 
 
 @dataclass(frozen=True)
