@@ -32,7 +32,7 @@ class RetargetRobot:
     model: object  # mujoco.MjModel (floating base: a free joint at qpos[0:7])
     joint_names: list[str]  # actuated joints, in qpos order
     qpos_adr: np.ndarray  # [nj] int, qpos address of each actuated joint
-    joint_range: np.ndarray  # [nj, 2] rad (metres for slide joints)
+    joint_range: np.ndarray  # [nj, 2] rad (metres for slide joints): the range the solver may use (Robot.retarget_range)
     velocity_limit: np.ndarray  # [nj] rad/s
     nominal_qpos: np.ndarray  # [nq] standing pose, soles on the floor
     keypoints: list[Keypoint]  # human joint -> robot site, weight (the robots stage's type)
@@ -80,7 +80,7 @@ class RetargetRobot:
             model=robot.model,
             joint_names=list(robot.joint_names),
             qpos_adr=np.asarray(robot.qpos_adr),
-            joint_range=np.asarray(robot.joint_range),
+            joint_range=np.asarray(getattr(robot, "retarget_range", robot.joint_range)),
             velocity_limit=np.asarray(robot.velocity_limit),
             nominal_qpos=np.asarray(robot.nominal_qpos()),
             keypoints=list(robot.keypoints),

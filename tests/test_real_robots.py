@@ -85,6 +85,19 @@ def test_op3_mass_and_identified_servo_model(op3):
     np.testing.assert_allclose(op3.torque_limit, 4.1)
 
 
+def test_op3_elbows_bend_one_way_when_retargeted_only(op3):
+    from retarget.robot_model import RetargetRobot
+
+    solver_range = RetargetRobot.from_robot(op3).joint_range
+    for joint, (lo, hi) in (("l_el", (-2.4, 0.0)), ("r_el", (0.0, 2.4))):
+        i = op3.joint_index(joint)
+        np.testing.assert_allclose(op3.retarget_range[i], (lo, hi))
+        np.testing.assert_allclose(solver_range[i], (lo, hi))
+        np.testing.assert_allclose(op3.joint_range[i], (-2.4, 2.4))  # the servos keep the MJCF's range
+    others = [i for i, n in enumerate(op3.joint_names) if n not in ("l_el", "r_el")]
+    np.testing.assert_array_equal(op3.retarget_range[others], op3.joint_range[others])
+
+
 def test_op3_servo_map_and_bus(op3):
     assert {s.joint: s.id for s in op3.servos} == OP3_IDS
     assert all(s.model == "XM430-W350" and s.ticks_per_rev == 4096 for s in op3.servos)

@@ -320,6 +320,13 @@ def _drop_bus(text):
     return result
 
 
+def _retarget_ranges(line):
+    def edit(text):
+        return text + f"\n[retarget_ranges]\n{line}\n"
+
+    return edit
+
+
 def test_the_copy_itself_loads(tmp_path):
     path = _write_bad(tmp_path, _sub('summary = "', 'summary = "copy of '))
     assert load(path).nj == 20
@@ -344,6 +351,11 @@ def test_the_copy_itself_loads(tmp_path):
         (_sub("[soles.right]", "[soles.rite]"), r"\[soles\] missing table 'right'"),
         (_sub("half_size = [0.06, 0.035]", "half_size = [0.06]"), r"\[soles\.left\] field 'half_size' must be a list of 2 numbers"),
         (_sub("name = \"op3_like\"", "name = \"op3_like"), r"not valid TOML"),
+        (_retarget_ranges("l_elbo = [0.0, 1.0]"), r"\[retarget_ranges\.l_elbo\] unknown joint 'l_elbo'"),
+        (_retarget_ranges("l_knee = [-1.0, 1.0]"), r"\[retarget_ranges\.l_knee\] \[-1, 1\] rad reaches outside the joint range"),
+        (_retarget_ranges("l_knee = [1.0, 0.5]"), r"\[retarget_ranges\.l_knee\] needs low < high"),
+        (_retarget_ranges("l_knee = [1.0, 1.5]"), r"\[retarget_ranges\.l_knee\] .* leaves out the nominal pose's 0\.6 rad"),
+        (_retarget_ranges("l_knee = [1.0]"), r"\[retarget_ranges\] field 'l_knee' must be a list of 2 numbers"),
     ],
     ids=[
         "unknown-keypoint-site",
@@ -362,6 +374,11 @@ def test_the_copy_itself_loads(tmp_path):
         "missing-sole",
         "bad-half-size",
         "bad-toml",
+        "retarget-range-unknown-joint",
+        "retarget-range-outside-joint-range",
+        "retarget-range-empty",
+        "retarget-range-without-nominal",
+        "retarget-range-not-a-pair",
     ],
 )
 def test_malformed_description_names_the_entry(tmp_path, edit, pattern):

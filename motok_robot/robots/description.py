@@ -141,6 +141,9 @@ class RobotDescription:
     servos: list[ServoSpec] = field(default_factory=list)
     bus: BusSpec | None = None
     velocity_limits: dict[str, float] = field(default_factory=dict)  # joint (or "default") -> rad/s
+    #: joint -> (low, high) rad: the range the retargeter may use, inside the MJCF joint range (a
+    #: pose prior, e.g. an elbow that bends one way only); servo and validation limits stay the MJCF's
+    retarget_ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
     #: the feasibility stage's settings for this robot (the ``[feasibility]`` table: fields of
     #: ``FeasibilityConfig``, nested tables for ``gait``, ``balance``, ``refine_config``); they are
     #: checked where the stage reads them (``motok_robot.feasibility.config.robot_config``)
@@ -293,6 +296,13 @@ def parse_description(path: str | Path) -> RobotDescription:
             raise r.fail(f"velocity_limits.{joint}", problem)
         velocity_limits[joint] = value
 
+    retarget_ranges = {}
+    for joint in r.table(data, "retarget_ranges", "", required=False):
+        lo, hi = r.numbers(data["retarget_ranges"], joint, 2, "retarget_ranges")
+        if not lo < hi:
+            raise r.fail(f"retarget_ranges.{joint}", f"needs low < high, got [{lo:g}, {hi:g}]")
+        retarget_ranges[joint] = (lo, hi)
+
     bus = None
     if "bus" in data:
         b = r.table(data, "bus", "")
@@ -372,6 +382,7 @@ def parse_description(path: str | Path) -> RobotDescription:
         servos=servos,
         bus=bus,
         velocity_limits=velocity_limits,
+        retarget_ranges=retarget_ranges,
         feasibility=r.table(data, "feasibility", "", required=False),
     )
 
@@ -426,6 +437,16 @@ def check_against_model(desc: RobotDescription, model, joint_names: list[str], j
     for joint in desc.velocity_limits:
         if joint != "default" and joint not in joints:
             raise r.fail(f"velocity_limits.{joint}", f"unknown joint {joint!r} {known}")
+    for joint, (rlo, rhi) in desc.retarget_ranges.items():
+        where = f"retarget_ranges.{joint}"
+        if joint not in joints:
+            raise r.fail(where, f"unknown joint {joint!r} {known}")
+        lo, hi = joint_range[index[joint]]
+        if rlo < lo or rhi > hi:
+            raise r.fail(where, f"[{rlo:g}, {rhi:g}] rad reaches outside the joint range [{lo:.4g}, {hi:.4g}] of {desc.mjcf.name}")
+        angle = desc.nominal_pose.get(joint, 0.0)
+        if not rlo <= angle <= rhi:
+            raise r.fail(where, f"[{rlo:g}, {rhi:g}] rad leaves out the nominal pose's {angle:g} rad")
 
     if desc.servos:
         for spec in desc.servos:

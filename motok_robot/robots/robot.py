@@ -67,7 +67,8 @@ class Robot:
 
     * ``name``, ``mjcf_path``, ``description`` (:class:`RobotDescription`), ``model`` (``mujoco.MjModel``)
     * ``joint_names`` list[str] [nj], qpos order; ``qpos_adr`` / ``dof_adr`` int [nj]
-    * ``joint_range`` [nj, 2] rad; ``velocity_limit`` [nj] rad/s; ``torque_limit`` [nj] N m
+    * ``joint_range`` [nj, 2] rad (the MJCF's); ``retarget_range`` [nj, 2] rad, inside it (the
+      description's ``[retarget_ranges]``); ``velocity_limit`` [nj] rad/s; ``torque_limit`` [nj] N m
     * ``actuator_joint`` int [nu]: index into ``joint_names`` of the joint each actuator drives
     * ``keypoints``, ``soles``, ``limb_scale``, ``servos``, ``bus`` (from the description)
     """
@@ -98,6 +99,11 @@ class Robot:
         self.joint_range = m.jnt_range[self._joint_ids].astype(np.float64).copy()
 
         check_against_model(description, m, self.joint_names, self.joint_range)
+        #: [nj, 2] rad: the joint range narrowed by the description's ``[retarget_ranges]`` (what the
+        #: retargeter may use; limits everywhere else are ``joint_range``)
+        self.retarget_range = self.joint_range.copy()
+        for joint, bounds in description.retarget_ranges.items():
+            self.retarget_range[self.joint_names.index(joint)] = bounds
 
         index = {n: i for i, n in enumerate(self.joint_names)}
         # actuators: one per joint, each on a joint transmission
