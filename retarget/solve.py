@@ -286,15 +286,27 @@ class Retargeter:
             bar = tqdm(windows, desc=desc, unit="window", disable=not progress)
         for s, e, commit in bar:
             prob = self.problem(e - s, geom_pairs)
-            if s == 0 and known.sum() == 0 and self._presolve_size(e) > 0:
+            presolved = s == 0 and known.sum() == 0 and self._presolve_size(e) > 0
+            if presolved:
                 self._presolve(x, known, self._presolve_size(e), e, targets, kp_targets, contacts, vel_step, swing, fps)
-            x0 = self._warm_start(x, known, s, e, targets, kp_targets)
             history = x[s - 2 : s] if s >= 2 else (np.stack([x[0], x[0]]) if s == 1 else None)
             prev_contact = contacts[s - 1] if s >= 1 else None
-            sol = prob.solve(
-                x0, kp_targets[s:e], targets.heading[s:e], targets.foot_dir[s:e], contacts[s:e],
-                history, prev_contact, vel_step, self.config.ground_height, **self._slice(swing, s, e), fps=fps,
-            )
+
+            def solve_window():
+                return prob.solve(
+                    self._warm_start(x, known, s, e, targets, kp_targets), kp_targets[s:e], targets.heading[s:e],
+                    targets.foot_dir[s:e], contacts[s:e], history, prev_contact, vel_step, self.config.ground_height,
+                    **self._slice(swing, s, e), fps=fps,
+                )
+
+            sol = solve_window()
+            if presolved and not sol.success:  # the presolve's chain can start the first window where
+                # IPOPT finds no way back to feasibility (seen on a Bandai walk with the OP3's one-way
+                # elbows): solve it again from the plain warm start, the nominal pose on the human root
+                known[s:e] = False
+                again = solve_window()
+                if again.success:
+                    sol = again
             x[s:e] = sol.x
             known[s:e] = True
             if not reports and not geom_pairs:

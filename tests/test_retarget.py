@@ -449,6 +449,36 @@ def test_non_converged_window_names_the_violated_constraint(robot):
     assert any(k in w.violated for k in ("sole", "velocity", "bound"))
 
 
+def test_a_first_window_that_fails_from_the_presolve_is_solved_again_from_the_plain_start(robot, monkeypatch):
+    """The presolve's chain can start the first window where IPOPT finds no way back to
+    feasibility (a Bandai walk on the OP3 with its one-way elbows: every window of the clip then
+    failed); the first window is then solved again from the nominal pose on the human root."""
+    import dataclasses
+
+    from retarget import problem as problem_module
+
+    human = synthetic_walk(T=40)
+    cfg = replace(SMALL, presolve_frames=5, collision=CollisionConfig(enabled=False))
+    plain = Retargeter(robot, replace(cfg, presolve_frames=0)).run(human, 20.0, progress=False)
+    starts = []
+    original = problem_module.WindowProblem.solve
+
+    def solve(self, x0, *args, **kwargs):
+        sol = original(self, x0, *args, **kwargs)
+        if self.W == cfg.window:
+            starts.append(np.array(x0))
+            if len(starts) == 1:  # the first full window, started from the presolve: make it fail
+                return dataclasses.replace(sol, success=False, status="Infeasible_Problem_Detected")
+        return sol
+
+    monkeypatch.setattr(problem_module.WindowProblem, "solve", solve)
+    res = Retargeter(robot, cfg).run(human, 20.0, progress=False)
+    assert res.success
+    assert len(starts) == len(res.windows) + 1  # the first window twice
+    assert not np.allclose(starts[0], starts[1])  # the second time not from the presolve's guess
+    np.testing.assert_allclose(res.qpos, plain.qpos, atol=1e-6)  # but as if there was no presolve
+
+
 def test_bad_input_errors_name_the_problem(robot, small, tmp_path):
     rt = small
     j = synthetic_walk(T=10)
