@@ -57,6 +57,18 @@ def test_config_overrides_parse_and_reject_unknown_keys():
         ValidationConfig().with_overrides(["max_velocity_ratio"])
 
 
+def test_physics_steps_at_the_robot_models_own_timestep_unless_set(tiny):
+    from motok_robot.feasibility.config import FeasibilityConfig
+    from motok_robot.feasibility.physics import ServoPhysics
+    from motok_robot.sim.rollout import servo_model
+
+    own = tiny.model.opt.timestep
+    assert servo_model(tiny, ValidationConfig())[0].opt.timestep == own
+    assert ServoPhysics(tiny, timestep_s=FeasibilityConfig().timestep_s).dt == own
+    assert servo_model(tiny, ValidationConfig(physics_timestep_s=own / 2))[0].opt.timestep == own / 2
+    assert tiny.model.opt.timestep == own  # the robot's own model is left alone
+
+
 def test_convex_hull_and_signed_distance():
     square = convex_hull(np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0.5], [1, 0.5]]))
     assert len(square) == 4

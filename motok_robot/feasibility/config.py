@@ -230,8 +230,9 @@ class FeasibilityConfig:
     zmp_axes: str = "lateral"
     #: run the predictive-sampling refinement of the goals (:mod:`.refine`)
     refine: bool = False
-    #: physics timestep (s): the validation rollout's (ValidationConfig.physics_timestep_s)
-    timestep_s: float = 0.004
+    #: physics timestep (s); 0: the robot model's own, as the validation rollout
+    #: (ValidationConfig.physics_timestep_s) and the simulated rig
+    timestep_s: float = 0.0
     #: servo goals change by at most this fraction of the velocity limit per frame
     goal_velocity_fraction: float = 0.95
     #: contact height (m) and friction of the inverse dynamics behind the feedforward goals

@@ -26,11 +26,11 @@ import numpy as np
 from motok_robot.feasibility.balance import BalanceController, BalancePlan, imu_frame
 
 
-def servo_model(index, timestep_s: float = 0.004, motor_kp_per_nm: float = 10.0,
+def servo_model(index, timestep_s: float = 0.0, motor_kp_per_nm: float = 10.0,
                 motor_kd_ratio: float = 0.05) -> tuple[mujoco.MjModel, np.ndarray]:
     """Copy of the robot model ready for tracking, and each actuator's gear [nu].
 
-    ``timestep_s`` > 0 replaces the model's own step.  Position actuators are kept; plain
+    ``timestep_s`` > 0 replaces the model's own step (0 keeps it).  Position actuators are kept; plain
     motors get a PD servo law ``kp = motor_kp_per_nm x force limit`` (N m/rad),
     ``kd = motor_kd_ratio x kp``, their force limits kept."""
     model = copy.deepcopy(index.model)
@@ -67,7 +67,7 @@ def read_imu(model: mujoco.MjModel, data: mujoco.MjData, imu: tuple[int, int]) -
 class ServoPhysics:
     """Tick-by-tick physics of a batch of robots (see the module docstring)."""
 
-    def __init__(self, index, timestep_s: float = 0.004, rate_hz: float = 125.0, motor_kp_per_nm: float = 10.0,
+    def __init__(self, index, timestep_s: float = 0.0, rate_hz: float = 125.0, motor_kp_per_nm: float = 10.0,
                  motor_kd_ratio: float = 0.05, model: mujoco.MjModel | None = None):
         self.index = index
         if model is None:
@@ -199,7 +199,7 @@ class ServoPhysics:
 
 
 def execute(index, qpos0: np.ndarray, goals: np.ndarray, fps: float, plan: BalancePlan | None,
-            timestep_s: float = 0.004, initial_qvel: np.ndarray | None = None,
+            timestep_s: float = 0.0, initial_qvel: np.ndarray | None = None,
             fall_tilt_rad: float = 1.0) -> tuple[np.ndarray, int | None]:
     """The rollout of ``goals`` [T, nj] from ``qpos0`` (at rest unless ``initial_qvel``) with the
     plan's controller: qpos [T, nq] at the frame times, and the first frame whose torso is tilted

@@ -120,7 +120,7 @@ class _Cost:
 
 
 def refine_goals(index, qpos: np.ndarray, fps: float, goals: np.ndarray, plan: BalancePlan | None,
-                 config: RefineConfig | None = None, timestep_s: float = 0.004, initial_qvel: np.ndarray | None = None,
+                 config: RefineConfig | None = None, timestep_s: float = 0.0, initial_qvel: np.ndarray | None = None,
                  progress=None) -> RefineResult:
     """Refined servo goals [T, nj] for the reference ``qpos`` [T, nq] at ``fps``, warm-started
     from ``goals`` [T, nj], with the balance controller of ``plan`` in the loop (None: open loop).

@@ -126,11 +126,12 @@ class ValidationConfig:
     #: fail when more than this fraction of CoP samples with contact lie outside the support
     #: polygon by more than ``zmp_tolerance_m``.
     max_cop_outside_ratio: float = 0.05
-    #: physics timestep (s) of the rollout; 0 keeps the robot model's own ``opt.timestep``.
-    #: 4 ms (250 Hz, twice the 125 Hz servo bus cycle) halves the cost of the usual 2 ms; seven
-    #: clean and fault clips give the same verdicts on both shipped robots at 2 and 4 ms (see
-    #: docs/validation.md).  Set 0 for the model's own step.
-    physics_timestep_s: float = 0.004
+    #: physics timestep (s) of the rollout; 0 (the default) keeps the robot model's own
+    #: ``opt.timestep`` (2 ms on every shipped robot), the step its contacts were made for: MuJoCo
+    #: stiffens no contact beyond twice the step, so the system-identified OP3's 4 ms contact time
+    #: constant becomes 8 ms at a 4 ms step, and loaded soles creep more (docs/validation.md).
+    #: 0.004 halves the cost.
+    physics_timestep_s: float = 0.0
     #: servo goals of the rollout (and of playback, which streams the validated goals):
     #: True = inverse-dynamics feedforward, goal = reference + (required torque + servo
     #: damping x velocity) / servo stiffness, clamped to the joint range and velocity limit
