@@ -140,6 +140,20 @@ def test_the_whole_body_puts_the_feet_on_the_footholds_within_the_velocity_limit
     assert np.array_equal(walk.qpos[:, op3.qpos_adr[arms]], qpos[:, op3.qpos_adr[arms]])  # upper body kept
 
 
+def test_a_walk_starting_on_a_straight_knee_still_puts_that_foot_on_the_floor():
+    """A reference that starts with the right leg straight and swung forward (the first frame of
+    a real Bandai walk on the OP3): from there the leg solve holds the knee at its limit and
+    left the foot 6 mm into the floor, which kicked the robot over in physics; the first frame
+    now starts again from the robot's own stance."""
+    index = index_robot(load("op3"))
+    qpos = _gliding(index, 3.0, 0.06)
+    for joint, angle in (("r_hip_pitch", 0.693), ("r_knee", 0.0), ("r_ank_pitch", 0.462)):
+        qpos[:, index.qpos_adr[index.joint_names.index(joint)]] = angle
+    schedule = plan_steps(index, qpos, FPS, first_step_frame=12)
+    walk = generate_gait(index, qpos, FPS, schedule)
+    assert walk.foot_errors[:12].max() < 1e-3
+
+
 def test_the_walks_joints_stay_below_the_speed_their_damping_allows(op3):
     from motok_robot.feasibility.stage import damping_speed_limit
 
@@ -154,6 +168,38 @@ def test_the_walks_joints_stay_below_the_speed_their_damping_allows(op3):
     assert speed(free) > 1.0  # the walk moves its legs faster than the bound below
     bounded = generate_gait(op3, qpos, FPS, schedule, speed_limit=np.full(op3.nj, 1.0))
     assert speed(bounded) <= 1.0 + 1e-6
+
+
+def test_a_leg_held_back_by_its_speed_limit_keeps_the_foot_flat(op3):
+    """The swing foot asked to rise faster than its knee may bend: it rises as far as the knee
+    allows and stays flat where it is (the joint at its bound is held and the others re-solved
+    around it), rather than the hip and ankle doing their share of the full lift alone, which
+    tipped the foot up 30 deg about its heel and shoved it 57 mm forward along the floor."""
+    import mujoco
+
+    from motok_robot.feasibility.zmp_shift import leg_dofs, solve_legs
+
+    legs = leg_dofs(op3)
+    data = mujoco.MjData(op3.kin_model)
+    start = op3.nominal_qpos.copy()
+    data.qpos[:] = start
+    mujoco.mj_kinematics(op3.kin_model, data)
+    foot = op3.sole_body[1]
+    pos, quat = data.xpos[op3.sole_body].copy(), data.xquat[op3.sole_body].copy()
+    goal = pos.copy()
+    goal[1, 2] += 0.015  # the right foot 15 mm up in one frame, flat
+    knee = op3.qpos_adr[op3.joint_names.index("r_knee")]
+    max_step = np.full(op3.kin_model.nq, 0.3)
+    max_step[knee] = 0.05  # rad per frame: the knee is too slow for that
+    q = start.copy()
+    solve_legs(op3, q, goal, quat, legs, data, previous=start, max_step=max_step)
+    assert abs(q[knee] - start[knee]) == pytest.approx(0.05)
+    data.qpos[:] = q
+    mujoco.mj_kinematics(op3.kin_model, data)
+    moved = data.xpos[foot] - pos[1]
+    tilt = np.degrees(2 * np.arccos(min(1.0, abs(float(np.dot(data.xquat[foot], quat[1]))))))
+    assert 0.001 < moved[2] < 0.015 and np.hypot(moved[0], moved[1]) < 0.002
+    assert tilt < 1.0, f"the foot tipped {tilt:.1f} deg"
 
 
 def test_the_walks_base_height_leaves_out_the_human_pelvis_bob(op3):

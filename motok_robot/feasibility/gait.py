@@ -222,6 +222,13 @@ def generate_gait(index, qpos: np.ndarray, fps: float, schedule: StepSchedule, *
                                        previous=out[t - 1], max_step=max_step)
             else:
                 errors[t] = solve_legs(index, out[t], foot_pos[t], foot_quat[t], legs, data)
+                if t == 0 and errors[t] > 1e-3:  # e.g. a straight knee, where the solve cannot bend
+                    # it (a singular point): start again from the robot's own stance
+                    again = out[t].copy()
+                    again[leg_q] = index.nominal_qpos[leg_q]
+                    error = solve_legs(index, again, foot_pos[t], foot_quat[t], legs, data)
+                    if error < errors[t]:
+                        out[t], errors[t] = again, error
         current = _com(index, out)[:, :2]
         if need.max() <= 0:
             break

@@ -141,19 +141,30 @@ def solve_legs(index, qpos_t: np.ndarray, foot_pos: np.ndarray, foot_quat: np.nd
     """Re-solve the legs in place so each sole body reaches its pose; returns the position error (m).
 
     With ``previous`` (qpos [nq] of the frame before) and ``max_step`` ([nq] rad per frame, for
-    the leg joints), each joint stays within ``max_step`` of its previous value: a velocity limit."""
+    the leg joints), each joint stays within ``max_step`` of its previous value: a velocity limit.
+    A joint that reaches its bound (velocity or range) is held there and the step is solved again
+    for the others (an active set), so the leg's remaining joints keep the foot's pose as well as
+    they can: clipping each joint of a free step on its own would break the coordination, e.g.
+    hip, knee and ankle pitch each at their speed limit tip the sole by the ankle's whole step."""
     model = index.kin_model
     jacp = np.zeros((3, model.nv))
     jacr = np.zeros((3, model.nv))
     err = np.zeros(6)
     q_err = np.zeros(3)
     worst = 0.0
-    limits = {}
+    lower = np.full(model.nq, -np.inf)
+    upper = np.full(model.nq, np.inf)
     for j in range(model.njnt):
         if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE and model.jnt_limited[j]:
-            limits[int(model.jnt_qposadr[j])] = model.jnt_range[j]
+            lower[model.jnt_qposadr[j]], upper[model.jnt_qposadr[j]] = model.jnt_range[j]
     for side, (qadr, dadr) in enumerate(legs):
         body = int(index.sole_body[side])
+        lo, hi = lower[qadr], upper[qadr]
+        if previous is not None:
+            lo = np.maximum(lo, previous[qadr] - max_step[qadr])
+            hi = np.minimum(hi, previous[qadr] + max_step[qadr])
+            hi = np.maximum(hi, lo)  # a previous frame outside the range: the range wins
+        qpos_t[qadr] = np.clip(qpos_t[qadr], lo, hi)
         for _ in range(iterations):
             data.qpos[:] = qpos_t
             mujoco.mj_kinematics(model, data)
@@ -166,13 +177,21 @@ def solve_legs(index, qpos_t: np.ndarray, foot_pos: np.ndarray, foot_quat: np.nd
             mujoco.mj_comPos(model, data)
             mujoco.mj_jacBody(model, data, jacp, jacr, body)
             J = np.vstack([jacp[:, dadr], jacr[:, dadr]])
-            step = J.T @ np.linalg.solve(J @ J.T + damping * np.eye(6), err)
-            qpos_t[qadr] += np.clip(step, -0.05, 0.05)  # small steps: stay on the reference's IK branch
-            for a in qadr:
-                if previous is not None:
-                    qpos_t[a] = np.clip(qpos_t[a], previous[a] - max_step[a], previous[a] + max_step[a])
-                if a in limits:
-                    qpos_t[a] = np.clip(qpos_t[a], limits[a][0], limits[a][1])
+            q = qpos_t[qadr]
+            free = np.ones(len(qadr), dtype=bool)
+            target = q.copy()
+            for _ in range(len(qadr)):
+                Jf = J[:, free]
+                step = np.zeros(len(qadr))
+                step[free] = Jf.T @ np.linalg.solve(Jf @ Jf.T + damping * np.eye(6), err - J[:, ~free] @ (target - q)[~free])
+                step[free] = np.clip(step[free], -0.05, 0.05)  # small steps: stay on the reference's IK branch
+                target[free] = q[free] + step[free]
+                out = free & ((target < lo) | (target > hi))
+                if not out.any():
+                    break
+                target[out] = np.clip(target[out], lo[out], hi[out])  # held at the bound it reached
+                free &= ~out
+            qpos_t[qadr] = np.clip(target, lo, hi)
         data.qpos[:] = qpos_t
         mujoco.mj_kinematics(model, data)
         worst = max(worst, float(np.linalg.norm(foot_pos[side] - data.xpos[body])))
