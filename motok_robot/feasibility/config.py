@@ -158,6 +158,10 @@ class GaitConfig:
     #: the longest step (how far a foot lands ahead of the other), per leg length; 0.27 on
     #: op3_like = 6.8 cm, about half a foot length: the synthetic walk that stays up at 0.5 s a step
     advance_per_leg: float = 0.27
+    #: a motion that travels faster than those steps follow at ``max_time_warp`` is walked with
+    #: longer steps, up to this (0.4 on op3_like = 10 cm): on op3_like, 0.4 took the angry Bandai
+    #: walk's distance from its path from 0.51 m to 0.08 m; walks slow enough keep ``advance_per_leg``
+    max_advance_per_leg: float = 0.4
     #: the largest turn of a foot per step (rad)
     turn_per_step_rad: float = 0.3
     #: how high the swing foot lifts at mid-swing, per leg length (0.15 on op3_like = 3.8 cm)
@@ -200,7 +204,8 @@ class GaitConfig:
     def __post_init__(self):
         _check_ranges("gait", self, (("step_period_s", 0.2, 2.0), ("double_support", 0.05, 0.8),
                                      ("zmp_transfer_share", 0.1, 1.0),
-                                     ("advance_per_leg", 0.02, 1.0), ("turn_per_step_rad", 0.0, 1.0),
+                                     ("advance_per_leg", 0.02, 1.0), ("max_advance_per_leg", 0.02, 1.0),
+                                     ("turn_per_step_rad", 0.0, 1.0),
                                      ("clearance_per_leg", 0.0, 0.5), ("vertical_share", 0.0, 0.45),
                                      ("damping_speed_share", 0.0, 1.0), ("arm_clearance_per_height", 0.0, 0.1),
                                      ("height_smoothing_s", 0.0, 5.0),

@@ -39,7 +39,7 @@ from motok_robot.feasibility.balance import BalancePlan, build_plan
 from motok_robot.feasibility.clearance import keep_arms_clear
 from motok_robot.feasibility.config import FeasibilityConfig, robot_config
 from motok_robot.feasibility.dynamics import required_torque
-from motok_robot.feasibility.footsteps import RobotFeet, plan_steps, stance_offsets, time_warp_for
+from motok_robot.feasibility.footsteps import RobotFeet, advance_for, plan_steps, stance_offsets, time_warp_for
 from motok_robot.feasibility.gait import generate_gait
 from motok_robot.feasibility.feedforward import GOALS_FILE, feedforward_goals, save_servo_goals, servo_gains
 from motok_robot.feasibility.physics import execute, servo_model
@@ -169,8 +169,9 @@ def walk_task(trajectory, index, config, record: dict):
     soles = _soles(index, qpos)
     if not walks(index, qpos, feet, gait, soles):
         return None
-    warp = time_warp_for(qpos, fps, feet, gait.step_period_s, gait.advance_per_leg, gait.turn_per_step_rad,
-                         gait.max_time_warp)
+    advance = advance_for(qpos, fps, feet, gait.step_period_s, gait.advance_per_leg, gait.max_advance_per_leg,
+                          gait.max_time_warp)
+    warp = time_warp_for(qpos, fps, feet, gait.step_period_s, advance, gait.turn_per_step_rad, gait.max_time_warp)
     contacts = soles[1] < config.contact_height_m  # as sole_contacts
     if warp > 1.0:
         trajectory = retime(trajectory, warp)
@@ -179,7 +180,7 @@ def walk_task(trajectory, index, config, record: dict):
     reference = np.asarray(trajectory.qpos, dtype=np.float64)
     offsets = stance_offsets(feet, qpos, soles[0], contacts)
     schedule = plan_steps(index, reference, fps, first_step_frame=before, step_period_s=gait.step_period_s,
-                          double_support=gait.double_support, advance_per_leg=gait.advance_per_leg,
+                          double_support=gait.double_support, advance_per_leg=advance,
                           turn_per_step_rad=gait.turn_per_step_rad, clearance_per_leg=gait.clearance_per_leg,
                           first_foot=first_lifted_foot(contacts), feet=feet, offsets=offsets,
                           lift_share=gait.vertical_share, zmp_outward_per_leg=gait.zmp_outward_per_leg)
@@ -187,7 +188,7 @@ def walk_task(trajectory, index, config, record: dict):
                          zmp_transfer_share=gait.zmp_transfer_share, height_window_s=gait.height_smoothing_s * warp,
                          speed_limit=damping_speed_limit(index, gait.damping_speed_share)
                          if gait.damping_speed_share > 0 else None)
-    record["gait"] = {"time_warp": warp, "lead_in_s": before / fps, "lead_out_s": round(gait.lead_out_s * fps) / fps,
+    record["gait"] = {"time_warp": warp, "advance_per_leg": advance, "lead_in_s": before / fps, "lead_out_s": round(gait.lead_out_s * fps) / fps,
                       **schedule.record(), **walk.record()}
     task = walk.qpos
     if gait.arm_clearance_per_height > 0:  # the reference's arms swing with the human's legs, not these
