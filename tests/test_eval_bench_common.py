@@ -44,7 +44,7 @@ def test_time_median_runs_the_function_the_requested_number_of_times():
 def test_peak_memory_sees_a_large_allocation():
     def allocate():
         block = np.ones(40 * 2**20 // 8)  # 40 MB
-        time.sleep(0.05)
+        time.sleep(0.3)  # long enough for the sampling thread on a loaded machine (0.05 s missed it once in CI)
         return float(block[-1])
 
     value, mem = common.measure_peak_memory(allocate, python_heap=True)
