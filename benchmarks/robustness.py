@@ -18,8 +18,13 @@ the servo velocity limit, a two-step walk) and, when ``--datasets`` exists, the 
 ``--work/retarget/ROBOT/CLIP/robot.npz`` (``--retarget [GLOB ...]`` retargets the missing ones, or
 those matching a glob, as that script does and into its cache: seconds to minutes each).
 
+With ``--stage`` the clips are instead the feasibility stage's executed walks and motions of
+``feasibility_mocap.py --variants D --work WORK`` (``WORK/runs/ROBOT/CLIP/D/feasible``), played
+with the stage's own servo goals: closed loop with its balance plan (foothold tracking included),
+open loop without it.
+
     python benchmarks/robustness.py [--robot op3_like] [--push-fractions 0.2 0.3 0.4] [--walk-period S] [--max-clips N]
-        [--no-mocap] [--clips GLOB ...] [--retarget [GLOB ...]] [--out JSON]
+        [--no-mocap] [--clips GLOB ...] [--retarget [GLOB ...]] [--stage] [--work WORK] [--out JSON]
 
 Prints a line per clip and the table perturbation x mode (clips, passed, fell, pass rate);
 writes benchmarks/results/robustness_ROBOT.json with the rows and the machine description.
@@ -81,10 +86,12 @@ def torso_push(index, qpos: np.ndarray, fps: float, direction: str, fraction: fl
     return Push(body=int(index.root_body), force=(fx, fy, 0.0), start_s=start, duration_s=duration_s)
 
 
-def validate_perturbed(trajectory, index, perturbation: dict, mode: str, models: dict):
+def validate_perturbed(trajectory, index, perturbation: dict, mode: str, models: dict, goals: dict | None = None):
     """``validate_trajectory`` of ``trajectory`` with ``perturbation``'s physics, ``mode``
     closed or open loop; ``models`` caches the varied servo models by (stiffness, mass)
-    (``varied_model`` builds them with ``servo_model``'s defaults, which are ``ValidationConfig``'s)."""
+    (``varied_model`` builds them with ``servo_model``'s defaults, which are ``ValidationConfig``'s).
+    ``goals``: the feasibility stage's servo goals of ``trajectory`` (``load_servo_goals``), played
+    with the stage's balance plan (closed) or without it (open) instead of validation's own."""
     from motok_robot.feasibility import BalanceConfig
     from motok_robot.sim.validate import validate_trajectory
 
@@ -97,6 +104,9 @@ def validate_perturbed(trajectory, index, perturbation: dict, mode: str, models:
     push = perturbation["push"]
     pushes = [] if push is None else [torso_push(index, trajectory.qpos, trajectory.fps, push["direction"],
                                                  push["fraction"])]
+    if goals is not None:
+        played = goals if mode == "closed" else {**goals, "plan": None}
+        return validate_trajectory(trajectory, index, plots=False, servo_goals=played, physics_model=model, pushes=pushes)
     balance = BalanceConfig() if mode == "closed" else BalanceConfig(enabled=False)
     return validate_trajectory(trajectory, index, plots=False, balance=balance, physics_model=model, pushes=pushes)
 
@@ -151,6 +161,23 @@ def mocap_clips(robot_name: str, datasets: Path, work: Path, retarget: list[str]
     return out, missing
 
 
+def stage_clips(robot_name: str, work: Path, datasets: Path, globs: list[str] | None = None) -> list[dict]:
+    """The feasibility stage's outputs of ``feasibility_mocap.py --variants D`` under
+    ``work/runs/ROBOT/CLIP/D/feasible`` (``robot.npz`` with the ``servo_goals.npz`` made from it),
+    for clips matching one of ``globs``; the group (locomotion, other) from the datasets when found."""
+    groups = {}
+    if datasets.is_dir():
+        from feasibility_mocap import find_clips
+
+        groups = {c["clip"]: c["group"] for c in find_clips(datasets, work)[0]}
+    out = []
+    for npz in sorted((work / "runs" / robot_name).glob("*/D/feasible/robot.npz")):
+        name = npz.parent.parent.parent.name
+        if _matches(name, globs) and (npz.parent / "servo_goals.npz").is_file():
+            out.append({"clip": name, "group": groups.get(name, "stage"), "npz": npz, "goals": npz.parent / "servo_goals.npz"})
+    return out
+
+
 # -- tables -----------------------------------------------------------------------------------------
 def summary_rows(rows: list[dict], names: list[str], group: str | None = None) -> list[dict]:
     """Per perturbation x mode: clips, passed, fell, pass rate (rows of ``group`` or all)."""
@@ -189,6 +216,9 @@ def main(argv=None) -> int:
     ap.add_argument("--datasets", type=Path, default=REPO_ROOT.parent / "shared" / "datasets")
     ap.add_argument("--work", type=Path, default=Path("/tmp/feasibility_mocap"),
                     help="feasibility_mocap's work folder (extracted clips, cached retargets)")
+    ap.add_argument("--stage", action="store_true",
+                    help="the feasibility stage's executed walks of --work (feasibility_mocap.py --variants D) "
+                         "with their own servo goals and balance plan, instead of the retargeted clips")
     ap.add_argument("--out", type=Path, default=None, help="JSON (default benchmarks/results/robustness_ROBOT.json)")
     args = ap.parse_args(argv)
     out = args.out or RESULTS_DIR / f"robustness_{args.robot}.json"
@@ -200,9 +230,14 @@ def main(argv=None) -> int:
     robot = load(args.robot)
     index = index_robot(robot)
     started = time.perf_counter()
-    clips = synthetic_clips(index, args.walk_period)
+    clips = [] if args.stage else synthetic_clips(index, args.walk_period)
     missing: list[str] = []
-    if not args.no_mocap:
+    if args.stage:
+        clips = stage_clips(args.robot, args.work, args.datasets, args.clips)
+        if not clips:
+            print(f"no feasibility stage outputs under {args.work / 'runs' / args.robot} (run feasibility_mocap.py "
+                  f"--variants D --work {args.work} first)", flush=True)
+    elif not args.no_mocap:
         if args.datasets.is_dir():
             real, missing = mocap_clips(args.robot, args.datasets, args.work, args.retarget, args.clips)
             clips += real
@@ -216,7 +251,10 @@ def main(argv=None) -> int:
     weight = index.total_mass * float(-index.model.opt.gravity[2])
     meta = {"robot": args.robot, "weight_n": weight, "push_s": PUSH_S, "push_start": "mid-clip",
             "push_fractions": args.push_fractions, "walk_step_period_s": args.walk_period, "push_body": index.model.body(index.root_body).name,
-            "perturbations": variants, "modes": {"closed": "BalanceConfig()", "open": "BalanceConfig(enabled=False)"},
+            "perturbations": variants,
+            "modes": ({"closed": "the stage's servo goals and balance plan", "open": "the stage's servo goals, no controller"}
+                      if args.stage else {"closed": "BalanceConfig()", "open": "BalanceConfig(enabled=False)"}),
+            "clips_from": "feasibility stage outputs (variant D)" if args.stage else "retargeted",
             "nominal_screen": [], "mocap_without_retarget": missing}
     machine = machine_description()
     models: dict = {}
@@ -226,11 +264,21 @@ def main(argv=None) -> int:
         if args.max_clips is not None and kept >= args.max_clips:
             break
         t0 = time.perf_counter()
+        goals = None
         if "npz" in clip:
             trajectory = load_robot_npz(clip["npz"], robot)
+            if "goals" in clip:  # made from this very file, as validate_file checks
+                import hashlib
+
+                from motok_robot.feasibility.feedforward import load_servo_goals
+
+                goals = load_servo_goals(clip["goals"])
+                if goals["source_sha256"] != hashlib.sha256(clip["npz"].read_bytes()).hexdigest():
+                    print(f"{clip['clip']}: {clip['goals']} was not made from {clip['npz']}, left out", flush=True)
+                    continue
         else:
             trajectory = RobotTrajectory(clip["qpos"], FPS, index.joint_names, index.name, source=clip["clip"])
-        nominal = validate_perturbed(trajectory, index, variants[0], "closed", models)
+        nominal = validate_perturbed(trajectory, index, variants[0], "closed", models, goals)
         screen = {"clip": clip["clip"], "group": clip["group"], "duration_s": trajectory.duration_s,
                   "passed": nominal.passed, "failed_checks": nominal.report["failed_checks"]}
         meta["nominal_screen"].append(screen)
@@ -242,7 +290,7 @@ def main(argv=None) -> int:
         for variant in variants:
             for mode in MODES:
                 result = nominal if (variant is variants[0] and mode == "closed") else \
-                    validate_perturbed(trajectory, index, variant, mode, models)
+                    validate_perturbed(trajectory, index, variant, mode, models, goals)
                 m = result.report["metrics"]
                 rows.append({"clip": clip["clip"], "group": clip["group"], "perturbation": variant["name"],
                              "mode": mode, "passed": result.passed, "fell": bool(m.get("fell")),

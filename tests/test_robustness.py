@@ -101,3 +101,28 @@ def test_a_hard_torso_push_makes_the_standing_robot_fall_in_both_modes(tiny):
         pushed = R.validate_perturbed(trajectory, tiny, hard, mode, {})
         assert pushed.report["metrics"]["fell"] and "fall" in pushed.report["failed_checks"]
         assert pushed.rollout.qpos[-1, 0] > qpos[-1, 0] + 0.05  # it went forward, the way it was pushed
+
+
+def test_the_stage_outputs_are_played_with_their_own_goals_closed_and_open_loop(tiny, tmp_path, retargeted):
+    """``--stage``: a feasibility stage output found under WORK/runs/ROBOT/CLIP/D/feasible is played
+    with the stage's servo goals, closed loop with its balance plan and open loop without it."""
+    from motok_robot.feasibility.config import FeasibilityConfig
+    from motok_robot.feasibility.feedforward import load_servo_goals
+    from motok_robot.feasibility.stage import make_feasible, write_feasible
+    from motok_robot.sim.trajectory import load_robot_npz
+
+    qpos = S.standing(tiny, 1.5, FPS)
+    result = make_feasible(retargeted(tiny, qpos), tiny, FeasibilityConfig())
+    folder = tmp_path / "runs" / tiny.name / "stand" / "D" / "feasible"
+    npz = write_feasible(result, folder, tiny.name)
+    clips = R.stage_clips(tiny.name, tmp_path, tmp_path / "no-datasets")
+    assert [(c["clip"], c["group"], c["npz"]) for c in clips] == [("stand", "stage", npz)]
+    goals = load_servo_goals(clips[0]["goals"])
+    assert goals["plan"] is not None
+    trajectory = load_robot_npz(npz, tiny)
+    nominal = R.perturbations([])[0]
+    closed = R.validate_perturbed(trajectory, tiny, nominal, "closed", {}, goals)
+    opened = R.validate_perturbed(trajectory, tiny, nominal, "open", {}, goals)
+    assert closed.report["servo_goals"]["mode"] == "feasibility" and closed.passed
+    assert np.array_equal(closed.goals, opened.goals)  # the stage's goals both times
+    assert np.abs(closed.rollout.qpos - opened.rollout.qpos).max() > 0  # only the controller differs
