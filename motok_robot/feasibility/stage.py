@@ -188,8 +188,8 @@ def walk_task(trajectory, index, config, record: dict):
                          zmp_transfer_share=gait.zmp_transfer_share, height_window_s=gait.height_smoothing_s * warp,
                          speed_limit=damping_speed_limit(index, gait.damping_speed_share)
                          if gait.damping_speed_share > 0 else None)
-    record["gait"] = {"time_warp": warp, "advance_per_leg": advance, "lead_in_s": before / fps, "lead_out_s": round(gait.lead_out_s * fps) / fps,
-                      **schedule.record(), **walk.record()}
+    record["gait"] = {"time_warp": warp, "advance_per_leg": advance, "lead_in_s": before / fps,
+                      "lead_out_s": round(gait.lead_out_s * fps) / fps, **schedule.record(), **walk.record()}
     task = walk.qpos
     if gait.arm_clearance_per_height > 0:  # the reference's arms swing with the human's legs, not these
         task, record["gait"]["arm_clearance"] = keep_arms_clear(index, task, fps,

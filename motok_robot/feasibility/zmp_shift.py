@@ -183,7 +183,8 @@ def solve_legs(index, qpos_t: np.ndarray, foot_pos: np.ndarray, foot_quat: np.nd
             for _ in range(len(qadr)):
                 Jf = J[:, free]
                 step = np.zeros(len(qadr))
-                step[free] = Jf.T @ np.linalg.solve(Jf @ Jf.T + damping * np.eye(6), err - J[:, ~free] @ (target - q)[~free])
+                held = J[:, ~free] @ (target - q)[~free]  # what the held joints already move
+                step[free] = Jf.T @ np.linalg.solve(Jf @ Jf.T + damping * np.eye(6), err - held)
                 step[free] = np.clip(step[free], -0.05, 0.05)  # small steps: stay on the reference's IK branch
                 target[free] = q[free] + step[free]
                 out = free & ((target < lo) | (target > hi))

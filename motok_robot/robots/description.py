@@ -443,7 +443,8 @@ def check_against_model(desc: RobotDescription, model, joint_names: list[str], j
             raise r.fail(where, f"unknown joint {joint!r} {known}")
         lo, hi = joint_range[index[joint]]
         if rlo < lo or rhi > hi:
-            raise r.fail(where, f"[{rlo:g}, {rhi:g}] rad reaches outside the joint range [{lo:.4g}, {hi:.4g}] of {desc.mjcf.name}")
+            raise r.fail(where, f"[{rlo:g}, {rhi:g}] rad reaches outside the joint range [{lo:.4g}, {hi:.4g}] "
+                                f"of {desc.mjcf.name}")
         angle = desc.nominal_pose.get(joint, 0.0)
         if not rlo <= angle <= rhi:
             raise r.fail(where, f"[{rlo:g}, {rhi:g}] rad leaves out the nominal pose's {angle:g} rad")
