@@ -74,6 +74,35 @@ def test_footsteps_follow_the_path_within_the_step_limits(op3):
     assert near[single].max() < 1e-9
 
 
+def test_an_inner_foot_steps_in_as_far_as_a_wide_stance_allows_and_no_closer(op3):
+    """Walking sideways (to the right) on a stance wider than the closest the feet may pass: the
+    inner (left) foot lands as close to the stance foot as the path asks, further than a quarter
+    step, but never closer than that gap."""
+    from motok_robot.feasibility.footsteps import MIN_GAP_PER_LEG
+
+    feet = RobotFeet(op3)
+    advance = 0.27 * feet.leg_length
+    qpos = _gliding(op3, 4.0, 0.0, rest_s=1.0)
+    T = int(round(4.0 * FPS)) + 1
+    qpos[:, 1] -= 0.5 * advance / 0.5 * np.minimum(np.arange(len(qpos)), T - 1) / FPS  # half a step per step, rightwards
+    wide = feet.offset.copy()
+    wide[:, 0] = 0.0
+    wide[:, 1] += np.array([1.0, -1.0]) * 0.3 * feet.leg_length
+    schedule = plan_steps(op3, qpos, FPS, first_step_frame=12, feet=feet, offsets=wide)
+    closest = feet.offset[0, 1] - feet.offset[1, 1] + MIN_GAP_PER_LEG * feet.leg_length
+    gaps = []  # the left foot's landing, across from the right foot it lands beside
+    right = None
+    for f in schedule.footholds:
+        if f.foot == 1:
+            right = np.asarray(f.pos[:2])
+        elif right is not None:
+            gaps.append(float(np.asarray(f.pos[:2])[1] - right[1]))
+    gaps = np.array(gaps[1:-1])  # the walk, not the first and last steps
+    width = wide[0, 1] - wide[1, 1]
+    assert gaps.min() < width - 0.25 * advance - 0.002  # it stepped in more than a quarter step
+    assert gaps.min() >= closest - 1e-6  # and never closer than the feet may pass
+
+
 def test_the_trailing_foot_carries_nothing_from_the_other_feet_landing_until_it_lifts(op3):
     qpos = _gliding(op3, 4.0, 0.1, rest_s=1.0)
     schedule = plan_steps(op3, qpos, FPS, first_step_frame=12, double_support=0.2)
