@@ -163,8 +163,8 @@ def mocap_clips(robot_name: str, datasets: Path, work: Path, retarget: list[str]
 
 def stage_clips(robot_name: str, work: Path, datasets: Path, globs: list[str] | None = None) -> list[dict]:
     """The feasibility stage's outputs of ``feasibility_mocap.py --variants D`` under
-    ``work/runs/ROBOT/CLIP/D/feasible`` (``robot.npz`` with the ``servo_goals.npz`` made from it),
-    for clips matching one of ``globs``; the group (locomotion, other) from the datasets when found."""
+    ``work/runs/ROBOT/CLIP/D/feasible`` (``robot.npz``; the ``servo_goals.npz`` made from it is read
+    with it), for clips matching one of ``globs``; the group (locomotion, other) from the datasets when found."""
     groups = {}
     if datasets.is_dir():
         from feasibility_mocap import find_clips
@@ -173,8 +173,8 @@ def stage_clips(robot_name: str, work: Path, datasets: Path, globs: list[str] | 
     out = []
     for npz in sorted((work / "runs" / robot_name).glob("*/D/feasible/robot.npz")):
         name = npz.parent.parent.parent.name
-        if _matches(name, globs) and (npz.parent / "servo_goals.npz").is_file():
-            out.append({"clip": name, "group": groups.get(name, "stage"), "npz": npz, "goals": npz.parent / "servo_goals.npz"})
+        if _matches(name, globs):
+            out.append({"clip": name, "group": groups.get(name, "stage"), "npz": npz, "stage": True})
     return out
 
 
@@ -230,10 +230,10 @@ def main(argv=None) -> int:
     robot = load(args.robot)
     index = index_robot(robot)
     started = time.perf_counter()
-    clips = [] if args.stage else synthetic_clips(index, args.walk_period)
+    clips = stage_clips(args.robot, args.work, args.datasets, args.clips) if args.stage else \
+        synthetic_clips(index, args.walk_period)
     missing: list[str] = []
     if args.stage:
-        clips = stage_clips(args.robot, args.work, args.datasets, args.clips)
         if not clips:
             print(f"no feasibility stage outputs under {args.work / 'runs' / args.robot} (run feasibility_mocap.py "
                   f"--variants D --work {args.work} first)", flush=True)
@@ -267,14 +267,12 @@ def main(argv=None) -> int:
         goals = None
         if "npz" in clip:
             trajectory = load_robot_npz(clip["npz"], robot)
-            if "goals" in clip:  # made from this very file, as validate_file checks
-                import hashlib
+            if clip.get("stage"):
+                from motok_robot.sim.validate import stage_goals_beside
 
-                from motok_robot.feasibility.feedforward import load_servo_goals
-
-                goals = load_servo_goals(clip["goals"])
-                if goals["source_sha256"] != hashlib.sha256(clip["npz"].read_bytes()).hexdigest():
-                    print(f"{clip['clip']}: {clip['goals']} was not made from {clip['npz']}, left out", flush=True)
+                goals = stage_goals_beside(clip["npz"])
+                if goals is None:
+                    print(f"{clip['clip']}: no servo_goals.npz made from {clip['npz']} beside it, left out", flush=True)
                     continue
         else:
             trajectory = RobotTrajectory(clip["qpos"], FPS, index.joint_names, index.name, source=clip["clip"])

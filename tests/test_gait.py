@@ -159,11 +159,12 @@ def test_the_time_warp_slows_what_the_robot_cannot_step(op3):
 
 
 def test_a_path_too_fast_even_at_the_largest_time_warp_is_walked_with_longer_steps(op3):
-    from motok_robot.feasibility.footsteps import advance_for
+    from motok_robot.feasibility.footsteps import walk_timing
 
     feet = RobotFeet(op3)
     robot_speed = 0.27 * feet.leg_length / 0.5
-    steps = {k: advance_for(_gliding(op3, 4.0, k * robot_speed), FPS, feet, 0.5, 0.27, 0.4, 3.0) for k in (2.0, 3.5, 8.0)}
+    steps = {k: walk_timing(_gliding(op3, 4.0, k * robot_speed), FPS, feet, 0.5, 0.27, 0.3, 3.0, 0.4)[0]
+             for k in (2.0, 3.5, 8.0)}
     assert steps[2.0] == 0.27  # 2x slower is enough: the usual steps
     assert steps[3.5] == pytest.approx(0.27 * 3.5 / 3.0, rel=0.05)  # just long enough at 3x
     assert steps[8.0] == 0.4  # as long as they may be; the robot still falls behind

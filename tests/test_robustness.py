@@ -110,6 +110,7 @@ def test_the_stage_outputs_are_played_with_their_own_goals_closed_and_open_loop(
     from motok_robot.feasibility.feedforward import load_servo_goals
     from motok_robot.feasibility.stage import make_feasible, write_feasible
     from motok_robot.sim.trajectory import load_robot_npz
+    from motok_robot.sim.validate import stage_goals_beside
 
     qpos = S.standing(tiny, 1.5, FPS)
     result = make_feasible(retargeted(tiny, qpos), tiny, FeasibilityConfig())
@@ -117,8 +118,14 @@ def test_the_stage_outputs_are_played_with_their_own_goals_closed_and_open_loop(
     npz = write_feasible(result, folder, tiny.name)
     clips = R.stage_clips(tiny.name, tmp_path, tmp_path / "no-datasets")
     assert [(c["clip"], c["group"], c["npz"]) for c in clips] == [("stand", "stage", npz)]
-    goals = load_servo_goals(clips[0]["goals"])
-    assert goals["plan"] is not None
+    goals = stage_goals_beside(npz)
+    assert goals is not None and goals["plan"] is not None
+    assert np.array_equal(goals["goals"], load_servo_goals(folder / "servo_goals.npz")["goals"])
+    other = tmp_path / "other" / "robot.npz"  # the same goals beside another file are not its goals
+    other.parent.mkdir()
+    (other.parent / "servo_goals.npz").write_bytes((folder / "servo_goals.npz").read_bytes())
+    other.write_bytes(npz.read_bytes() + b"\0")
+    assert stage_goals_beside(other) is None
     trajectory = load_robot_npz(npz, tiny)
     nominal = R.perturbations([])[0]
     closed = R.validate_perturbed(trajectory, tiny, nominal, "closed", {}, goals)

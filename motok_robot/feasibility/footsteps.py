@@ -143,40 +143,41 @@ def base_path(qpos: np.ndarray, fps: float, window_s: float) -> tuple[np.ndarray
     return xy, yaw
 
 
-def _path_needs(qpos: np.ndarray, fps: float, feet: RobotFeet, step_period_s: float, advance_per_leg: float,
-                turn_per_step_rad: float) -> tuple[float, float]:
-    """The largest ratios, over one-second windows, of the reference's speed and turn rate to
-    the robot's stepping speed and turn rate (0, 0 for a clip shorter than a window)."""
+def _path_rates(qpos: np.ndarray, fps: float, step_period_s: float) -> tuple[float, float]:
+    """The reference's largest speed (m/s) and turn rate (rad/s) over one-second windows of its
+    smoothed path (0, 0 for a clip shorter than a window)."""
     xy, yaw = base_path(qpos, fps, step_period_s)
-    T = qpos.shape[0]
     window = max(1, int(round(fps)))
-    if T <= window:
+    if qpos.shape[0] <= window:
         return 0.0, 0.0
     speed = np.linalg.norm(xy[window:] - xy[:-window], axis=1) * fps / window
     turn = np.abs(yaw[window:] - yaw[:-window]) * fps / window
-    robot_speed = advance_per_leg * feet.leg_length / step_period_s
-    robot_turn = turn_per_step_rad / step_period_s
-    return float(speed.max()) / robot_speed, float(turn.max()) / max(robot_turn, 1e-12)
+    return float(speed.max()), float(turn.max())
+
+
+def walk_timing(qpos: np.ndarray, fps: float, feet: RobotFeet, step_period_s: float, advance_per_leg: float,
+                turn_per_step_rad: float, max_time_warp: float,
+                max_advance_per_leg: float | None = None) -> tuple[float, float]:
+    """(step length per leg length, time warp) for the robot to follow ``qpos``'s path with its
+    own steps. The time warp is how many times slower it must play the motion: the largest ratio
+    of the reference's speed (and turn rate) to the robot's stepping speed (and turn rate), at
+    most ``max_time_warp``. The steps are ``advance_per_leg`` long, or longer, up to
+    ``max_advance_per_leg``, where the reference travels faster than that would follow even
+    ``max_time_warp`` times slower (the robot would fall behind its path)."""
+    speed, turn = _path_rates(qpos, fps, step_period_s)
+    advance = float(advance_per_leg)
+    speed_need = speed / (advance * feet.leg_length / step_period_s)
+    if max_advance_per_leg is not None and speed_need > max_time_warp:
+        advance = float(min(max(max_advance_per_leg, advance_per_leg), advance_per_leg * speed_need / max_time_warp))
+        speed_need = speed / (advance * feet.leg_length / step_period_s)
+    turn_need = turn / max(turn_per_step_rad / step_period_s, 1e-12)
+    return advance, float(min(max(speed_need, turn_need, 1.0), max_time_warp))
 
 
 def time_warp_for(qpos: np.ndarray, fps: float, feet: RobotFeet, step_period_s: float, advance_per_leg: float,
                   turn_per_step_rad: float, max_time_warp: float) -> float:
-    """How many times slower the robot must play ``qpos`` to follow its path with its own steps:
-    the largest ratio, over one-second windows, of the reference's speed (and turn rate) to the
-    robot's stepping speed (and turn rate)."""
-    speed, turn = _path_needs(qpos, fps, feet, step_period_s, advance_per_leg, turn_per_step_rad)
-    return float(min(max(speed, turn, 1.0), max_time_warp))
-
-
-def advance_for(qpos: np.ndarray, fps: float, feet: RobotFeet, step_period_s: float, advance_per_leg: float,
-                max_advance_per_leg: float, max_time_warp: float) -> float:
-    """The step length (per leg length) the robot walks ``qpos`` with: ``advance_per_leg``, or
-    longer, up to ``max_advance_per_leg``, where the reference travels faster than that would
-    follow even ``max_time_warp`` times slower (the robot would fall behind its path)."""
-    speed, _ = _path_needs(qpos, fps, feet, step_period_s, advance_per_leg, 1.0)
-    if speed <= max_time_warp:
-        return float(advance_per_leg)
-    return float(min(max(max_advance_per_leg, advance_per_leg), advance_per_leg * speed / max_time_warp))
+    """The time warp of :func:`walk_timing` with steps of ``advance_per_leg``."""
+    return walk_timing(qpos, fps, feet, step_period_s, advance_per_leg, turn_per_step_rad, max_time_warp)[1]
 
 
 def swing_progress(n: int, lift_share: float) -> np.ndarray:

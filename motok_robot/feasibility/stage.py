@@ -39,7 +39,7 @@ from motok_robot.feasibility.balance import BalancePlan, build_plan
 from motok_robot.feasibility.clearance import keep_arms_clear
 from motok_robot.feasibility.config import FeasibilityConfig, robot_config
 from motok_robot.feasibility.dynamics import required_torque
-from motok_robot.feasibility.footsteps import RobotFeet, advance_for, plan_steps, stance_offsets, time_warp_for
+from motok_robot.feasibility.footsteps import RobotFeet, plan_steps, stance_offsets, walk_timing
 from motok_robot.feasibility.gait import generate_gait
 from motok_robot.feasibility.feedforward import GOALS_FILE, feedforward_goals, save_servo_goals, servo_gains
 from motok_robot.feasibility.physics import execute, servo_model
@@ -169,9 +169,8 @@ def walk_task(trajectory, index, config, record: dict):
     soles = _soles(index, qpos)
     if not walks(index, qpos, feet, gait, soles):
         return None
-    advance = advance_for(qpos, fps, feet, gait.step_period_s, gait.advance_per_leg, gait.max_advance_per_leg,
-                          gait.max_time_warp)
-    warp = time_warp_for(qpos, fps, feet, gait.step_period_s, advance, gait.turn_per_step_rad, gait.max_time_warp)
+    advance, warp = walk_timing(qpos, fps, feet, gait.step_period_s, gait.advance_per_leg, gait.turn_per_step_rad,
+                                gait.max_time_warp, gait.max_advance_per_leg)
     contacts = soles[1] < config.contact_height_m  # as sole_contacts
     if warp > 1.0:
         trajectory = retime(trajectory, warp)

@@ -297,8 +297,9 @@ def parse_description(path: str | Path) -> RobotDescription:
         velocity_limits[joint] = value
 
     retarget_ranges = {}
-    for joint in r.table(data, "retarget_ranges", "", required=False):
-        lo, hi = r.numbers(data["retarget_ranges"], joint, 2, "retarget_ranges")
+    ranges_table = r.table(data, "retarget_ranges", "", required=False)
+    for joint in ranges_table:
+        lo, hi = r.numbers(ranges_table, joint, 2, "retarget_ranges")
         if not lo < hi:
             raise r.fail(f"retarget_ranges.{joint}", f"needs low < high, got [{lo:g}, {hi:g}]")
         retarget_ranges[joint] = (lo, hi)

@@ -161,14 +161,22 @@ def validate_file(path: str | Path, robot, config: ValidationConfig | None = Non
     index = robot if isinstance(robot, RobotIndex) else index_robot(robot)
     trajectory = load_robot_npz(path, _RobotView(index))
     digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
-    beside = Path(path).with_name(GOALS_FILE)
-    servo_goals = None
-    if physics and beside.is_file():
-        candidate = load_servo_goals(beside)
-        if candidate["source_sha256"] == digest and candidate["mode"] == "feasibility":
-            servo_goals = candidate
+    servo_goals = stage_goals_beside(path, digest) if physics else None
     return validate_trajectory(trajectory, index, config, out_dir, physics, plots, render, input_sha256=digest,
                                servo_goals=servo_goals)
+
+
+def stage_goals_beside(path: str | Path, digest: str | None = None) -> dict | None:
+    """The feasibility stage's ``servo_goals.npz`` beside ``path`` (robot.npz) when it was made from
+    this very file (its ``source_sha256``; ``digest``: the file's sha256 when already known), else None."""
+    import hashlib
+
+    beside = Path(path).with_name(GOALS_FILE)
+    if not beside.is_file():
+        return None
+    digest = digest or hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    goals = load_servo_goals(beside)
+    return goals if goals["source_sha256"] == digest and goals["mode"] == "feasibility" else None
 
 
 def write_servo_goals(result: ValidationResult, out_dir: str | Path) -> Path | None:
