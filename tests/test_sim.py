@@ -276,6 +276,42 @@ def test_fall_in_the_rollout_is_caught(tiny):
     assert frames and frames[0] == int(np.ceil(metrics["fall_time_s"] * FPS))
 
 
+def test_a_robot_that_stands_through_a_kick_fails_foot_lift_while_the_mean_pose_passes(tiny):
+    """The reference lifts the right foot for a short moment (a kick); the robot stands.  The mean
+    pose error over the clip stays small, the foot-lift check names the foot that did not rise."""
+    stand = S.standing(tiny, 3.0, FPS)
+    lifted = S.lift_foot_without_shift(tiny, 3.0, FPS)  # lifted from 40 % of the clip on
+    kick = stand.copy()
+    kick[30:36] = lifted[-1]  # 0.3 s up, then back
+    trajectory = RobotTrajectory(stand, FPS, tiny.joint_names, tiny.name, source="kick.npz", reference_qpos=kick)
+    result = validate_trajectory(trajectory, tiny)
+    check = result.report["checks"]["fidelity_foot_lift"]
+    assert "fidelity_foot_lift" in failed(result) and "fidelity_pose" not in failed(result)
+    leg_lift = 0.15 * tiny.nominal_qpos[2]
+    assert check["value"] == pytest.approx(leg_lift, rel=0.25)
+    assert check["details"]["right_reference_m"] > 0.7 * leg_lift and check["details"]["right_executed_m"] < 0.005
+    assert check["frames"] and 30 <= check["frames"][0] < 36
+    # the same clip done as asked passes the check
+    done = validate_trajectory(RobotTrajectory(kick, FPS, tiny.joint_names, tiny.name, source="kick.npz"), tiny)
+    assert done.report["checks"]["fidelity_foot_lift"]["value"] < 0.005
+
+
+def test_feet_lifted_higher_or_at_other_times_than_the_reference_pass_foot_lift(tiny):
+    """Only a lift the rollout fell short of counts: a re-planned walk steps higher and at its own times."""
+    from motok_robot.sim.fidelity import fidelity_measures
+
+    walk = S.walk(tiny, steps=2, step_period_s=2.4, fps=FPS)
+    valid = np.ones(walk.shape[0], dtype=bool)
+    late = np.concatenate([walk[:1].repeat(10, axis=0), walk[:-10]])  # the same steps, 0.5 s later
+    assert fidelity_measures(tiny, late, walk, valid)["foot_lift_shortfall_m"] < 1e-3
+    high = walk.copy()
+    high[:, 2] += 0.01 * np.sin(np.linspace(0, np.pi, walk.shape[0]))  # the whole robot 1 cm higher mid-clip
+    assert fidelity_measures(tiny, high, walk, valid)["foot_lift_shortfall_m"] < 1e-3
+    low = fidelity_measures(tiny, walk[:1].repeat(walk.shape[0], axis=0), walk, valid)  # never stepped
+    assert low["reference_lift_m"].max() > 0.01
+    assert low["foot_lift_shortfall_m"] == pytest.approx(low["reference_lift_m"].max(), abs=1e-9)
+
+
 def test_no_physics_leaves_physics_metrics_null(tiny):
     result = run(tiny, S.standing(tiny, 0.5, FPS), physics=False)
     assert result.report["metrics"]["fell"] is None and "fall" not in result.report["checks"]

@@ -114,6 +114,11 @@ class ValidationConfig:
     #: fidelity: fail when the root heading differs from the reference's by more than this (rad;
     #: 0.5 rad = 29 degrees, a turn of the robot the motion did not ask for)
     max_heading_error_rad: float = 0.5
+    #: fidelity: fail when a foot's highest lift in the rollout stays lower than in the reference
+    #: by more than this fraction of the robot's height (0.05: 2.7 cm on op3 and op3_like, a
+    #: third of the feasibility stage's gait clearance; real walks re-planned by the stage lift
+    #: their feet higher than the human did, a kick walked through without kicking does not)
+    max_foot_lift_shortfall_per_height: float = 0.05
     #: fidelity: fail when the robot plays the motion more than this many times slower than the
     #: source (robot.npz ``retime_factor``: retargeting's ``--retime``, the pipeline's slow-down,
     #: the feasibility stage's time warp).  3.0 is the feasibility stage's own bound

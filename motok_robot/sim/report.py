@@ -58,7 +58,7 @@ Schema (``"schema": "motok-robot/validation-report/1"``)::
 Check names: ``foot_skate_ratio``, ``foot_skate_distance``, ``penetration``, ``floating``,
 ``self_collision``, ``joint_limits``, ``joint_velocity``, ``joint_acceleration``, ``base_continuity``, ``torque``,
 ``static_balance``, ``zmp``, ``time_warp``, and with physics ``fall``, ``tracking``, ``base_drift``,
-``center_of_pressure``, ``fidelity_pose``, ``fidelity_heading``.  A check whose value cannot be measured (e.g. no quasi-static
+``center_of_pressure``, ``fidelity_pose``, ``fidelity_heading``, ``fidelity_foot_lift``.  A check whose value cannot be measured (e.g. no quasi-static
 contact frame for static balance) passes with ``value: null`` and says why in ``details``.
 """
 
@@ -141,7 +141,7 @@ def build_checks(index: RobotIndex, kin: KinematicResult, roll: RolloutResult | 
     ``retime_factor``), judged by the ``time_warp`` check.
 
     ``fidelity`` (:func:`motok_robot.sim.fidelity.fidelity_measures` of the rollout) adds the
-    ``fidelity_pose`` and ``fidelity_heading`` checks.
+    ``fidelity_pose``, ``fidelity_heading`` and ``fidelity_foot_lift`` checks.
 
     ``planned_contacts`` (bool [T, 2], the ``contacts`` field of robot.npz) only adds a
     diagnosis to the skating details: skating inside planned contact phases (the foot slides)
@@ -308,8 +308,24 @@ def build_checks(index: RobotIndex, kin: KinematicResult, roll: RolloutResult | 
             checks.append(_upper("fidelity_heading", fidelity["heading_error_max_rad"], c.max_heading_error_rad, "rad",
                                  "largest root heading difference between the rollout and the reference",
                                  _frames(valid & (fidelity["heading_error_rad"] > c.max_heading_error_rad))))
+            lift_limit = c.max_foot_lift_shortfall_per_height * index.height_m
+            lifts = {}
+            if fidelity["reference_lift_m"] is not None:
+                short = fidelity["reference_lift_m"] - fidelity["executed_lift_m"]
+                lifts = {f"{side}_reference_m": round(float(fidelity["reference_lift_m"][s]), 4) for s, side in
+                         enumerate(SIDES)} | {f"{side}_executed_m": round(float(fidelity["executed_lift_m"][s]), 4)
+                                              for s, side in enumerate(SIDES)}
+                lift_frames = sorted(int(fidelity["reference_lift_frame"][s]) for s in range(2) if short[s] > lift_limit)
+            else:
+                lift_frames = []
+            checks.append(_upper("fidelity_foot_lift", fidelity["foot_lift_shortfall_m"], lift_limit, "m",
+                                 f"how much lower a foot's highest lift (lowest sole corner above its lowest point) "
+                                 f"stayed in the rollout than in the reference, the larger of the two feet (threshold "
+                                 f"{c.max_foot_lift_shortfall_per_height} x robot height; frames: the reference's "
+                                 f"highest lift of a foot that fell short)", lift_frames, lifts))
             metrics.update(pose_error_mean_m=fidelity["pose_error_mean_m"],
-                           heading_error_max_rad=fidelity["heading_error_max_rad"])
+                           heading_error_max_rad=fidelity["heading_error_max_rad"],
+                           foot_lift_shortfall_m=fidelity["foot_lift_shortfall_m"])
 
     metrics["passed"] = all(ch.passed for ch in checks)
 
