@@ -152,6 +152,9 @@ class RetargetConfig:
     solver: SolverConfig = field(default_factory=SolverConfig)
     ground_height: float = 0.0  # metres, world z of the floor
     presolve_frames: int = 15  # the first window is warm-started by a sweep of windows this long (0 = off)
+    # a presolved first window that fails, or leaves a keypoint farther than this many leg lengths
+    # from its target, is solved again from the plain warm start; the lower objective is kept
+    presolve_retry_per_leg: float = 0.5
     velocity_margin: float = 0.98  # use this fraction of each joint's velocity limit
     # the inner sole edges stay at least this far apart across the human heading (robot leg lengths;
     # None = off): scaled human feet pass closer than a robot's wide soles allow (op3_like: 4.4 mm gap)

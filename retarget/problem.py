@@ -226,6 +226,7 @@ class WindowSolution:
     violated_frame: int | None  # window-local frame of that constraint
     violation: float  # its violation (m or rad)
     solve_seconds: float
+    objective: float = float("nan")  # the window's objective at x
 
 
 class StageFunctions:
@@ -654,4 +655,5 @@ class WindowProblem:
         return WindowSolution(
             x=x, success=success and violated is None, status=status, iterations=int(stats.get("iter_count", -1)),
             violated=violated, violated_frame=vframe, violation=violation, solve_seconds=seconds,
+            objective=float(np.array(res["f"]).ravel()[0]),
         )

@@ -217,6 +217,14 @@ class Retargeter:
             x[s : s + n] = sol.x
             known[s : s + n] = True
 
+    def _worst_keypoint_error(self, x: np.ndarray, kp_targets: np.ndarray) -> float:
+        """The largest distance (m) of a keypoint of the solved frames ``x`` [W, nx] from its target."""
+        W, K = len(x), kp_targets.shape[1]
+        if not K:
+            return 0.0
+        kp = np.array(self.kin.frame.map(W)(x.T)[0]).reshape(3, K, W, order="F")
+        return float(np.linalg.norm(kp.transpose(2, 1, 0) - kp_targets, axis=-1).max())
+
     def windows(self, T: int) -> list[tuple[int, int, int]]:
         """``[(start, stop, commit_stop)]`` for a clip of ``T`` frames."""
         W, O = self.window, self.overlap
@@ -300,12 +308,16 @@ class Retargeter:
                 )
 
             sol = solve_window()
-            if presolved and not sol.success:  # the presolve's chain can start the first window where
-                # IPOPT finds no way back to feasibility (seen on a Bandai walk with the OP3's one-way
-                # elbows): solve it again from the plain warm start, the nominal pose on the human root
+            if presolved and (not sol.success or self._worst_keypoint_error(sol.x, kp_targets[s:e])
+                              > self.config.presolve_retry_per_leg * self.kin.leg_length):
+                # the presolve's chain can start the first window where IPOPT finds no way back to
+                # feasibility (seen on a Bandai walk with the OP3's one-way elbows), or in a bad local
+                # minimum (a generated kick: the base pinned at its lowest bound, keypoints 27 cm off,
+                # "Solve_Succeeded"): solve it again from the plain warm start, the nominal pose on the
+                # human root, and keep the better solution
                 known[s:e] = False
                 again = solve_window()
-                if again.success:
+                if again.success and (not sol.success or again.objective < sol.objective):
                     sol = again
             x[s:e] = sol.x
             known[s:e] = True

@@ -11,7 +11,7 @@ import pytest
 
 from motok_robot.errors import InputError
 from motok_robot.feasibility.config import FeasibilityConfig, GaitConfig
-from motok_robot.feasibility.footsteps import RobotFeet, plan_steps, time_warp_for
+from motok_robot.feasibility.footsteps import RobotFeet, plan_steps, walk_timing
 from motok_robot.feasibility.gait import com_path, generate_gait, zmp_reference
 from motok_robot.feasibility.stage import make_feasible, walks, write_feasible
 from motok_robot.feasibility.zmp_shift import cart_table_zmp
@@ -72,6 +72,23 @@ def test_footsteps_follow_the_path_within_the_step_limits(op3):
     near = np.min(np.linalg.norm(zmp[:, None] - np.array([f.centre for f in schedule.footholds])[None], axis=2), axis=1)
     single = schedule.contacts.sum(axis=1) == 1
     assert near[single].max() < 1e-9
+
+
+def test_a_swing_rises_as_high_as_the_reference_foot_did_within_the_bounds(op3):
+    feet = RobotFeet(op3)
+    leg = feet.leg_length
+    qpos = _gliding(op3, 4.0, 0.1, rest_s=1.0)
+    reference_lift = np.zeros((len(qpos), 2))
+    reference_lift[:, 1] = 0.25 * leg  # the right foot high all along, the left on the floor
+    peaks = {}
+    for highest in (None, 0.3, 0.2):
+        schedule = plan_steps(op3, qpos, FPS, first_step_frame=12, clearance_per_leg=0.15, feet=feet,
+                              reference_lift=reference_lift, max_clearance_per_leg=highest)
+        lifted = (schedule.foot_pos[..., 2] - feet.height[None, :]) / leg
+        peaks[highest] = lifted[~schedule.contacts[:, 0], 0].max(), lifted[~schedule.contacts[:, 1], 1].max()
+    assert peaks[None] == pytest.approx((0.15, 0.15), abs=0.01)  # no upper bound given: the usual swing
+    assert peaks[0.3] == pytest.approx((0.15, 0.25), abs=0.01)  # as high as the reference's right foot
+    assert peaks[0.2] == pytest.approx((0.15, 0.2), abs=0.01)  # but no higher than the bound
 
 
 def test_an_inner_foot_steps_in_as_far_as_a_wide_stance_allows_and_no_closer(op3):
@@ -150,24 +167,41 @@ def test_the_inverse_dynamics_gives_an_unloaded_foot_no_share_of_the_weight(op3)
 def test_the_time_warp_slows_what_the_robot_cannot_step(op3):
     feet = RobotFeet(op3)
     robot_speed = 0.27 * feet.leg_length / 0.5
-    slow = time_warp_for(_gliding(op3, 4.0, 0.5 * robot_speed), FPS, feet, 0.5, 0.27, 0.3, 3.0)
-    fast = time_warp_for(_gliding(op3, 4.0, 2.0 * robot_speed), FPS, feet, 0.5, 0.27, 0.3, 3.0)
-    faster = time_warp_for(_gliding(op3, 4.0, 5.0 * robot_speed), FPS, feet, 0.5, 0.27, 0.3, 3.0)
-    assert slow == 1.0
-    assert fast == pytest.approx(2.0, rel=0.05)
-    assert faster == 3.0  # capped
+    gait = GaitConfig(max_advance_per_leg=0.27)
+    warp = {k: walk_timing(_gliding(op3, 4.0, k * robot_speed), FPS, feet, gait).time_warp for k in (0.5, 2.0, 5.0)}
+    assert warp[0.5] == 1.0
+    assert warp[2.0] == pytest.approx(2.0, rel=0.05)
+    assert warp[5.0] == 3.0  # capped
 
 
-def test_a_path_too_fast_even_at_the_largest_time_warp_is_walked_with_longer_steps(op3):
-    from motok_robot.feasibility.footsteps import walk_timing
-
+def test_a_sideways_path_is_slowed_by_the_sideways_steps_the_robot_can_take(op3):
+    """Sideways the feet cover (1/2 + 1/4) / 2 of a step length per step (the trailing foot may
+    not cross the leading one): a generated kick that drifted sideways was planned 2.7x too fast
+    and ended 0.2-0.3 m beside its path."""
     feet = RobotFeet(op3)
     robot_speed = 0.27 * feet.leg_length / 0.5
-    steps = {k: walk_timing(_gliding(op3, 4.0, k * robot_speed), FPS, feet, 0.5, 0.27, 0.3, 3.0, 0.4)[0]
-             for k in (2.0, 3.5, 8.0)}
-    assert steps[2.0] == 0.27  # 2x slower is enough: the usual steps
-    assert steps[3.5] == pytest.approx(0.27 * 3.5 / 3.0, rel=0.05)  # just long enough at 3x
-    assert steps[8.0] == 0.4  # as long as they may be; the robot still falls behind
+    side = _gliding(op3, 4.0, 0.5 * robot_speed)
+    side[:, 1], side[:, 0] = side[:, 0] - side[0, 0] + side[0, 1], side[0, 0]  # the same speed along +y
+    gait = GaitConfig(max_advance_per_leg=0.27, sideways_timing=True)
+    assert walk_timing(side, FPS, feet, gait).time_warp == pytest.approx(0.5 / 0.375, rel=0.05)
+    assert walk_timing(_gliding(op3, 4.0, 0.5 * robot_speed), FPS, feet, gait).time_warp == 1.0
+    assert walk_timing(side, FPS, feet, GaitConfig(max_advance_per_leg=0.27)).time_warp == 1.0  # off: speed only
+
+
+def test_a_path_too_fast_even_at_the_largest_time_warp_is_walked_with_longer_then_quicker_steps(op3):
+    feet = RobotFeet(op3)
+    robot_speed = 0.27 * feet.leg_length / 0.5
+    gait = GaitConfig(max_advance_per_leg=0.4, min_step_period_s=0.3)
+    timing = {k: walk_timing(_gliding(op3, 4.0, k * robot_speed), FPS, feet, gait) for k in (2.0, 3.5, 6.0, 20.0)}
+    assert (timing[2.0].advance_per_leg, timing[2.0].step_period_s) == (0.27, 0.5)  # 2x slower is enough
+    assert timing[3.5].advance_per_leg == pytest.approx(0.27 * 3.5 / 3.0, rel=0.05)  # just long enough at 3x
+    assert timing[3.5].step_period_s == 0.5
+    assert timing[6.0].advance_per_leg == 0.4  # as long as they may be, and quicker
+    assert timing[6.0].step_period_s == pytest.approx(0.5 * (0.4 / 0.27) * 3.0 / 6.0, rel=0.05)
+    assert timing[6.0].time_warp == pytest.approx(3.0)
+    assert (timing[20.0].advance_per_leg, timing[20.0].step_period_s) == (0.4, 0.3)  # the robot still falls behind
+    assert walk_timing(_gliding(op3, 4.0, 6.0 * robot_speed), FPS, feet,
+                       GaitConfig(max_advance_per_leg=0.4)).step_period_s == 0.5  # quicker steps are opt-in
 
 
 def test_the_whole_body_puts_the_feet_on_the_footholds_within_the_velocity_limits(op3):
@@ -268,9 +302,27 @@ def test_only_a_motion_that_goes_somewhere_is_walked(op3):
     assert not walks(op3, S.lift_foot_without_shift(op3, 3.0, FPS), feet, config)
 
 
+def test_feet_that_rise_high_are_walked_only_when_the_motion_goes_far(op3):
+    """A run lifts its feet as high as a kick; only the run leaves the spot."""
+    feet = RobotFeet(op3)
+    config = GaitConfig()  # min_run_travel_per_leg 2
+    leg = feet.leg_length
+
+    def hopping(distance_per_leg: float) -> np.ndarray:
+        qpos = _gliding(op3, 3.0, distance_per_leg * leg / 3.0)
+        qpos[20:26, 2] += 0.35 * leg  # both soles 0.35 leg lengths up for 0.3 s
+        return qpos
+
+    assert walks(op3, hopping(3.0), feet, config)
+    assert not walks(op3, hopping(1.5), feet, config)  # soles travel, but it ends near its start
+    assert not walks(op3, hopping(3.0), feet, GaitConfig(min_run_travel_per_leg=1000.0))  # off
+    assert walks(op3, _gliding(op3, 3.0, 1.5 * leg / 3.0), feet, config)  # low feet: walked as before
+
+
 def test_the_stage_walks_a_walk_with_the_robots_steps_and_validation_passes_what_it_should(op3, tmp_path, retargeted):
     qpos = S.walk(op3, steps=6, step_period_s=1.0, fps=FPS, double_support=0.2)
-    result = make_feasible(retargeted(op3, qpos), op3, FeasibilityConfig(gait=GaitConfig(enabled=True)))
+    gait = GaitConfig(enabled=True)
+    result = make_feasible(retargeted(op3, qpos), op3, FeasibilityConfig(gait=gait))
     record = result.record["gait"]
     assert record["steps"] >= 6 and record["time_warp"] == 1.0
     lead = int(round(record["lead_in_s"] * FPS))

@@ -479,6 +479,43 @@ def test_a_first_window_that_fails_from_the_presolve_is_solved_again_from_the_pl
     np.testing.assert_allclose(res.qpos, plain.qpos, atol=1e-6)  # but as if there was no presolve
 
 
+def test_a_first_window_far_from_its_targets_is_solved_again_and_the_lower_objective_kept(robot, monkeypatch):
+    """IPOPT can also succeed from the presolve's guess into a bad local minimum (a generated kick
+    on both OP3 models: the base pinned at its lowest bound, keypoints 27 cm from their targets):
+    a first window with a keypoint farther than ``presolve_retry_per_leg`` leg lengths from its
+    target is solved again from the plain start, and the solution with the lower objective kept."""
+    import dataclasses
+
+    from retarget import problem as problem_module
+
+    human = synthetic_walk(T=40)
+    cfg = replace(SMALL, presolve_frames=5, collision=CollisionConfig(enabled=False))
+    plain = Retargeter(robot, replace(cfg, presolve_frames=0)).run(human, 20.0, progress=False)
+    drop = 0.7 * Retargeter(robot, cfg).kin.leg_length  # beyond the retry bound of half a leg length
+    original = problem_module.WindowProblem.solve
+    objectives = []
+
+    def solve(self, x0, *args, **kwargs):
+        sol = original(self, x0, *args, **kwargs)
+        if self.W == cfg.window and not objectives:  # the first full window from the presolve: a
+            # "successful" solution with the base dropped and a higher objective
+            x = np.array(sol.x)
+            x[:, 2] -= drop
+            sol = dataclasses.replace(sol, x=x, objective=sol.objective + 1e3)
+        if self.W == cfg.window:
+            objectives.append(sol.objective)
+        return sol
+
+    monkeypatch.setattr(problem_module.WindowProblem, "solve", solve)
+    res = Retargeter(robot, cfg).run(human, 20.0, progress=False)
+    assert len(objectives) == len(res.windows) + 1  # the first window twice
+    np.testing.assert_allclose(res.qpos, plain.qpos, atol=1e-6)  # the plain start's solution kept
+    objectives.clear()
+    kept = Retargeter(robot, replace(cfg, presolve_retry_per_leg=10.0)).run(human, 20.0, progress=False)
+    assert len(objectives) == len(kept.windows)  # within the bound: solved once, as it came
+    assert kept.qpos[0, 2] == pytest.approx(plain.qpos[0, 2] - drop, abs=1e-3)
+
+
 def test_bad_input_errors_name_the_problem(robot, small, tmp_path):
     rt = small
     j = synthetic_walk(T=10)

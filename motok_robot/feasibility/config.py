@@ -162,10 +162,25 @@ class GaitConfig:
     #: longer steps, up to this (0.4 on op3_like = 10 cm): on op3_like, 0.4 took the angry Bandai
     #: walk's distance from its path from 0.51 m to 0.08 m; walks slow enough keep ``advance_per_leg``
     max_advance_per_leg: float = 0.4
+    #: ... and then with quicker steps, down to one every this many seconds (the ROBOTIS OP3
+    #: framework's own walk steps every 0.3 s: ``period_time`` 600 ms for a left and a right
+    #: step); ``step_period_s``: off
+    min_step_period_s: float = 0.5
+    #: time the walk on the path's forward and sideways speed in its heading frame, against the
+    #: steps the robot can take each way (sideways 0.375 of a step length per step); False: its
+    #: speed against forward steps.  Off by default: on op3_like it kept a generated kick that
+    #: drifted sideways on its path (0.19 -> 0.11 m) but the musical Bandai walk, slowed to the
+    #: 3x bound and walked with longer steps, then failed `torque` (1.02) and `foot_skate_distance`
+    sideways_timing: bool = False
     #: the largest turn of a foot per step (rad)
     turn_per_step_rad: float = 0.3
     #: how high the swing foot lifts at mid-swing, per leg length (0.15 on op3_like = 3.8 cm)
     clearance_per_leg: float = 0.15
+    #: a swing rises as high as the reference's same foot did near it, up to this per leg length
+    #: (0.3 on the OP3 = 7.2 cm; a run or a kick lifts its feet higher than a walk, and
+    #: `fidelity_foot_lift` fails a rollout whose feet stay 5 % of the robot's height lower);
+    #: ``clearance_per_leg``: off
+    max_clearance_per_leg: float = 0.3
     #: the swing foot rises and lands vertically over this share of the swing at each end (0.05:
     #: until it is 6 mm up on op3_like); the shorter it is, the slower the swing moves across
     #: (its joints' damping, a servo's back-EMF, takes most of the identified OP3's torque at
@@ -200,18 +215,25 @@ class GaitConfig:
     #: retargeted legs)
     min_travel_per_leg: float = 0.5
     max_lift_per_leg: float = 0.3
+    #: ... but a motion whose base ends farther than this (per leg length) from where it started
+    #: is walked however high its feet rise (a run: the runs tried end 2.4-9.5 leg lengths from
+    #: their start; the Bandai kick 0.45); 1000: off
+    min_run_travel_per_leg: float = 2.0
 
     def __post_init__(self):
-        _check_ranges("gait", self, (("step_period_s", 0.2, 2.0), ("double_support", 0.05, 0.8),
+        _check_ranges("gait", self, (("step_period_s", 0.2, 2.0), ("min_step_period_s", 0.2, 2.0),
+                                     ("double_support", 0.05, 0.8),
                                      ("zmp_transfer_share", 0.1, 1.0),
                                      ("advance_per_leg", 0.02, 1.0), ("max_advance_per_leg", 0.02, 1.0),
                                      ("turn_per_step_rad", 0.0, 1.0),
-                                     ("clearance_per_leg", 0.0, 0.5), ("vertical_share", 0.0, 0.45),
+                                     ("clearance_per_leg", 0.0, 0.5), ("max_clearance_per_leg", 0.0, 0.5),
+                                     ("vertical_share", 0.0, 0.45),
                                      ("damping_speed_share", 0.0, 1.0), ("arm_clearance_per_height", 0.0, 0.1),
                                      ("height_smoothing_s", 0.0, 5.0),
                                      ("zmp_outward_per_leg", 0.0, 0.2), ("lead_in_s", 0.0, 5.0),
                                      ("lead_out_s", 0.0, 5.0), ("max_time_warp", 1.0, 4.0),
-                                     ("min_travel_per_leg", 0.0, 10.0), ("max_lift_per_leg", 0.0, 2.0)))
+                                     ("min_travel_per_leg", 0.0, 10.0), ("max_lift_per_leg", 0.0, 2.0),
+                                     ("min_run_travel_per_leg", 0.0, 1000.0)))
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)

@@ -143,41 +143,70 @@ def base_path(qpos: np.ndarray, fps: float, window_s: float) -> tuple[np.ndarray
     return xy, yaw
 
 
-def _path_rates(qpos: np.ndarray, fps: float, step_period_s: float) -> tuple[float, float]:
-    """The reference's largest speed (m/s) and turn rate (rad/s) over one-second windows of its
-    smoothed path (0, 0 for a clip shorter than a window)."""
-    xy, yaw = base_path(qpos, fps, step_period_s)
+#: how far a swing foot may land to the side of where it would stand beside the stance foot,
+#: per step length (``plan_steps``), and how far towards the stance foot at least (a quarter step)
+SIDE_STEP_SHARE = 0.5
+INWARD_STEP_SHARE = 0.25
+
+
+@dataclass(frozen=True)
+class WalkTiming:
+    """How the robot walks a reference's path (:func:`walk_timing`)."""
+
+    advance_per_leg: float  # the longest step, per leg length
+    step_period_s: float    # one step every this many seconds (of the played motion)
+    time_warp: float        # how many times slower than the reference the motion is played
+
+
+def _path_rates(qpos: np.ndarray, fps: float, window_s: float) -> np.ndarray:
+    """[W, 3]: the reference's forward speed, sideways speed (m/s, in the frame of its smoothed
+    heading) and turn rate (rad/s) over each one-second window of its path smoothed over
+    ``window_s`` (no rows for a clip shorter than a window)."""
+    xy, yaw = base_path(qpos, fps, window_s)
     window = max(1, int(round(fps)))
     if qpos.shape[0] <= window:
-        return 0.0, 0.0
-    speed = np.linalg.norm(xy[window:] - xy[:-window], axis=1) * fps / window
-    turn = np.abs(yaw[window:] - yaw[:-window]) * fps / window
-    return float(speed.max()), float(turn.max())
+        return np.zeros((0, 3))
+    move = (xy[window:] - xy[:-window]) * fps / window
+    mid = 0.5 * (yaw[window:] + yaw[:-window])
+    c, s = np.cos(mid), np.sin(mid)
+    forward, side = c * move[:, 0] + s * move[:, 1], -s * move[:, 0] + c * move[:, 1]
+    return np.abs(np.stack([forward, side, (yaw[window:] - yaw[:-window]) * fps / window], axis=1))
 
 
-def walk_timing(qpos: np.ndarray, fps: float, feet: RobotFeet, step_period_s: float, advance_per_leg: float,
-                turn_per_step_rad: float, max_time_warp: float,
-                max_advance_per_leg: float | None = None) -> tuple[float, float]:
-    """(step length per leg length, time warp) for the robot to follow ``qpos``'s path with its
-    own steps. The time warp is how many times slower it must play the motion: the largest ratio
-    of the reference's speed (and turn rate) to the robot's stepping speed (and turn rate), at
-    most ``max_time_warp``. The steps are ``advance_per_leg`` long, or longer, up to
-    ``max_advance_per_leg``, where the reference travels faster than that would follow even
-    ``max_time_warp`` times slower (the robot would fall behind its path)."""
-    speed, turn = _path_rates(qpos, fps, step_period_s)
-    advance = float(advance_per_leg)
-    speed_need = speed / (advance * feet.leg_length / step_period_s)
-    if max_advance_per_leg is not None and speed_need > max_time_warp:
-        advance = float(min(max(max_advance_per_leg, advance_per_leg), advance_per_leg * speed_need / max_time_warp))
-        speed_need = speed / (advance * feet.leg_length / step_period_s)
-    turn_need = turn / max(turn_per_step_rad / step_period_s, 1e-12)
-    return advance, float(min(max(speed_need, turn_need, 1.0), max_time_warp))
+def walk_timing(qpos: np.ndarray, fps: float, feet: RobotFeet, gait) -> WalkTiming:
+    """How the robot follows ``qpos``'s path with its own steps, for ``gait`` (a
+    :class:`~motok_robot.feasibility.config.GaitConfig`).
 
+    The robot steps every ``gait.step_period_s`` with steps of at most ``gait.advance_per_leg``
+    leg lengths forward or back, ``SIDE_STEP_SHARE`` of that outward and ``INWARD_STEP_SHARE``
+    inward (so sideways it covers ``(SIDE + INWARD) / 2`` of a step length per step: the
+    trailing foot cannot cross the leading one) and ``gait.turn_per_step_rad`` of turn.  The
+    time warp is the largest ratio, over one-second windows, of what the reference asks (its
+    speed, or with ``gait.sideways_timing`` its forward and sideways speed in its own heading
+    frame, and its turn rate) to what those steps give, at most ``gait.max_time_warp``.  Where even that slow the robot would fall behind its
+    path, it takes longer steps, up to ``gait.max_advance_per_leg``, and then quicker ones, down
+    to ``gait.min_step_period_s``."""
+    rates = _path_rates(qpos, fps, gait.step_period_s)
+    if not gait.sideways_timing and rates.size:  # the path's speed against forward steps
+        rates = np.c_[np.hypot(rates[:, 0], rates[:, 1]), np.zeros(len(rates)), rates[:, 2]]
+    cap = float(gait.max_time_warp)
+    side_share = 0.5 * (SIDE_STEP_SHARE + INWARD_STEP_SHARE)
 
-def time_warp_for(qpos: np.ndarray, fps: float, feet: RobotFeet, step_period_s: float, advance_per_leg: float,
-                  turn_per_step_rad: float, max_time_warp: float) -> float:
-    """The time warp of :func:`walk_timing` with steps of ``advance_per_leg``."""
-    return walk_timing(qpos, fps, feet, step_period_s, advance_per_leg, turn_per_step_rad, max_time_warp)[1]
+    def need(advance: float, period: float, turning: bool = True) -> float:
+        if not rates.size:
+            return 1.0
+        step = advance * feet.leg_length
+        capacity = np.array([step, side_share * step, max(gait.turn_per_step_rad, 1e-12)]) / period
+        return float(max(1.0, (rates[:, :3 if turning else 2] / capacity[:3 if turning else 2]).max()))
+
+    advance, period = float(gait.advance_per_leg), float(gait.step_period_s)
+    longest = max(float(gait.max_advance_per_leg), advance)
+    if need(advance, period, turning=False) > cap and longest > advance:  # longer steps do not turn faster
+        advance = min(longest, advance * need(advance, period, turning=False) / cap)
+    quickest = min(float(gait.min_step_period_s), period)
+    if need(advance, period) > cap and quickest < period:
+        period = max(quickest, period * cap / need(advance, period))
+    return WalkTiming(advance_per_leg=advance, step_period_s=period, time_warp=min(need(advance, period), cap))
 
 
 def swing_progress(n: int, lift_share: float) -> np.ndarray:
@@ -193,7 +222,8 @@ def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, st
                double_support: float = 0.2, advance_per_leg: float = 0.27, turn_per_step_rad: float = 0.3,
                clearance_per_leg: float = 0.15, first_foot: int = 1, feet: RobotFeet | None = None,
                offsets: np.ndarray | None = None, lift_share: float = 0.15,
-               zmp_outward_per_leg: float = 0.04) -> StepSchedule:
+               zmp_outward_per_leg: float = 0.04, reference_lift: np.ndarray | None = None,
+               max_clearance_per_leg: float | None = None) -> StepSchedule:
     """The robot's footsteps and foot trajectories for reference ``qpos`` [T, nq] at ``fps``:
     both feet stand until ``first_step_frame``, then ``first_foot`` (0 left, 1 right) steps
     first and the feet alternate (see the module docstring).  ``offsets`` [2, 2]: each foot's
@@ -201,7 +231,10 @@ def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, st
     rises and lands vertically over the first and last ``lift_share`` of the swing.  The ZMP
     target of a foothold is its sole centre moved ``zmp_outward_per_leg`` leg lengths away from
     the other foot: the CoM then sways far enough to stand over the stance foot where it slows
-    down at the end of its sway."""
+    down at the end of its sway.  With ``reference_lift`` [T, 2] (how high each of the
+    reference's soles is above the floor, m) a swing rises as high as the same reference foot
+    rose within a step period of it, at least ``clearance_per_leg`` and at most
+    ``max_clearance_per_leg`` leg lengths (a run or a kick lifts its feet higher than a walk)."""
     feet = feet or RobotFeet(index)
     offsets = feet.offset if offsets is None else np.asarray(offsets, dtype=np.float64)
     T = qpos.shape[0]
@@ -214,8 +247,16 @@ def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, st
     # diagonal walk needs its inner foot to step in: on a Bandai walk-right clip at a quarter step
     # every foothold landed 4 cm off the path)
     closest = feet.offset[0, 1] - feet.offset[1, 1] + MIN_GAP_PER_LEG * feet.leg_length
-    inward = max(0.25 * advance, float(offsets[0, 1] - offsets[1, 1]) - closest)
+    inward = max(INWARD_STEP_SHARE * advance, float(offsets[0, 1] - offsets[1, 1]) - closest)
     lift = clearance_per_leg * feet.leg_length
+    highest = max(lift, (max_clearance_per_leg if max_clearance_per_leg is not None else clearance_per_leg)
+                  * feet.leg_length)
+
+    def swing_height(foot: int, first: int, last: int) -> float:
+        if reference_lift is None:
+            return lift
+        near = reference_lift[max(0, first - period):min(T, last + period + 1), foot]
+        return float(np.clip(near.max(), lift, highest)) if near.size else lift
     outward = zmp_outward_per_leg * feet.leg_length
 
     def hold(foot: int, xy: np.ndarray, yaw: float):
@@ -253,7 +294,7 @@ def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, st
         c, s = np.cos(s_yaw), np.sin(s_yaw)
         d = goal - beside
         local = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1]])
-        local = np.clip(local, [-advance, -0.5 * advance], [advance, 0.5 * advance])
+        local = np.clip(local, [-advance, -SIDE_STEP_SHARE * advance], [advance, SIDE_STEP_SHARE * advance])
         if swing == 0:  # never step across the stance foot, nor closer to it than the feet may pass
             local[1] = max(local[1], -inward)
         else:
@@ -272,11 +313,12 @@ def plan_steps(index, qpos: np.ndarray, fps: float, *, first_step_frame: int, st
             lift_frames = range(t0 + ds, land)
             n = len(lift_frames)
             across = swing_progress(n, lift_share)
+            apex = swing_height(swing, t0 + ds, land - 1)
             for i, t in enumerate(lift_frames):
                 u = (i + 1) / (n + 1)
                 ease = across[i]
                 foot_pos[t, swing] = p0 + ease * (p1 - p0)
-                foot_pos[t, swing, 2] = p0[2] + ease * (p1[2] - p0[2]) + lift * np.sin(np.pi * u)
+                foot_pos[t, swing, 2] = p0[2] + ease * (p1[2] - p0[2]) + apex * np.sin(np.pi * u)
                 foot_quat[t, swing] = feet.flat_quat(swing, yaw0 + ease * (goal_yaw - yaw0))
                 contacts[t, swing] = False
             current[swing] = [p1, q1, c1, goal_yaw, land]

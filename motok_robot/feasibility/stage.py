@@ -82,12 +82,16 @@ def _soles(index, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def walks(index, qpos: np.ndarray, feet, config, soles: tuple | None = None) -> bool:
     """Whether ``qpos`` [T, nq] is a walk to re-plan: both soles travel farther than
     ``config.min_travel_per_leg`` leg lengths over the clip, and no sole corner rises above
-    ``config.max_lift_per_leg`` leg lengths (a kick that high keeps its retargeted legs).
+    ``config.max_lift_per_leg`` leg lengths (a kick that high keeps its retargeted legs) unless
+    the base ends more than ``config.min_run_travel_per_leg`` leg lengths from where it started
+    (a run lifts its feet as high, but does not stay on the spot).
     ``soles``: :func:`_soles` of ``qpos`` when the caller has it."""
     xy, low = soles if soles is not None else _soles(index, qpos)
     travel = np.linalg.norm(np.diff(xy, axis=0), axis=2).sum(axis=0)
+    moved = float(np.linalg.norm(qpos[-1, :2] - qpos[0, :2])) if len(qpos) else 0.0
     return bool(travel.min() > config.min_travel_per_leg * feet.leg_length
-                and low.max() < config.max_lift_per_leg * feet.leg_length)
+                and (low.max() < config.max_lift_per_leg * feet.leg_length
+                     or moved > config.min_run_travel_per_leg * feet.leg_length))
 
 
 def first_lifted_foot(contacts: np.ndarray) -> int:
@@ -169,8 +173,8 @@ def walk_task(trajectory, index, config, record: dict):
     soles = _soles(index, qpos)
     if not walks(index, qpos, feet, gait, soles):
         return None
-    advance, warp = walk_timing(qpos, fps, feet, gait.step_period_s, gait.advance_per_leg, gait.turn_per_step_rad,
-                                gait.max_time_warp, gait.max_advance_per_leg)
+    timing = walk_timing(qpos, fps, feet, gait)
+    warp = timing.time_warp
     contacts = soles[1] < config.contact_height_m  # as sole_contacts
     if warp > 1.0:
         trajectory = retime(trajectory, warp)
@@ -178,16 +182,19 @@ def walk_task(trajectory, index, config, record: dict):
     trajectory = hold_ends(trajectory, before, int(round(gait.lead_out_s * fps)))
     reference = np.asarray(trajectory.qpos, dtype=np.float64)
     offsets = stance_offsets(feet, qpos, soles[0], contacts)
-    schedule = plan_steps(index, reference, fps, first_step_frame=before, step_period_s=gait.step_period_s,
-                          double_support=gait.double_support, advance_per_leg=advance,
+    schedule = plan_steps(index, reference, fps, first_step_frame=before, step_period_s=timing.step_period_s,
+                          double_support=gait.double_support, advance_per_leg=timing.advance_per_leg,
                           turn_per_step_rad=gait.turn_per_step_rad, clearance_per_leg=gait.clearance_per_leg,
                           first_foot=first_lifted_foot(contacts), feet=feet, offsets=offsets,
-                          lift_share=gait.vertical_share, zmp_outward_per_leg=gait.zmp_outward_per_leg)
+                          lift_share=gait.vertical_share, zmp_outward_per_leg=gait.zmp_outward_per_leg,
+                          reference_lift=_soles(index, reference)[1] if gait.max_clearance_per_leg > gait.clearance_per_leg
+                          else None, max_clearance_per_leg=gait.max_clearance_per_leg)
     walk = generate_gait(index, reference, fps, schedule, base_yaw=schedule.heading,
                          zmp_transfer_share=gait.zmp_transfer_share, height_window_s=gait.height_smoothing_s * warp,
                          speed_limit=damping_speed_limit(index, gait.damping_speed_share)
                          if gait.damping_speed_share > 0 else None)
-    record["gait"] = {"time_warp": warp, "advance_per_leg": advance, "lead_in_s": before / fps,
+    record["gait"] = {"time_warp": warp, "advance_per_leg": timing.advance_per_leg,
+                      "step_period_s": timing.step_period_s, "lead_in_s": before / fps,
                       "lead_out_s": round(gait.lead_out_s * fps) / fps, **schedule.record(), **walk.record()}
     task = walk.qpos
     if gait.arm_clearance_per_height > 0:  # the reference's arms swing with the human's legs, not these
