@@ -217,13 +217,13 @@ class Retargeter:
             x[s : s + n] = sol.x
             known[s : s + n] = True
 
-    def _worst_keypoint_error(self, x: np.ndarray, kp_targets: np.ndarray) -> float:
-        """The largest distance (m) of a keypoint of the solved frames ``x`` [W, nx] from its target."""
+    def _keypoint_errors(self, x: np.ndarray, kp_targets: np.ndarray) -> np.ndarray:
+        """[W, K] distance (m) of each keypoint of the solved frames ``x`` [W, nx] from its target."""
         W, K = len(x), kp_targets.shape[1]
         if not K:
-            return 0.0
+            return np.zeros((W, 0))
         kp = np.array(self.kin.frame.map(W)(x.T)[0]).reshape(3, K, W, order="F")
-        return float(np.linalg.norm(kp.transpose(2, 1, 0) - kp_targets, axis=-1).max())
+        return np.linalg.norm(kp.transpose(2, 1, 0) - kp_targets, axis=-1)
 
     def windows(self, T: int) -> list[tuple[int, int, int]]:
         """``[(start, stop, commit_stop)]`` for a clip of ``T`` frames."""
@@ -265,8 +265,7 @@ class Retargeter:
             self.cache.flush()  # C code of the problems built for this clip, compiled in the background
 
         qpos = self.kin.qpos_from_x(x)
-        kp = np.array(self.kin.frame.map(T)(x.T)[0]).reshape(3, K, T, order="F") if K else np.zeros((3, 0, T))
-        kp_err = np.linalg.norm(kp.transpose(2, 1, 0) - kp_targets, axis=-1)
+        kp_err = self._keypoint_errors(x, kp_targets)
         return RetargetResult(
             robot=self.robot.name, fps=float(fps), qpos=qpos, x=x, joint_names=list(self.robot.joint_names),
             contacts=contacts, keypoint_error=kp_err, keypoint_names=[k.human_joint for k in self.robot.keypoints],
@@ -308,7 +307,7 @@ class Retargeter:
                 )
 
             sol = solve_window()
-            if presolved and (not sol.success or self._worst_keypoint_error(sol.x, kp_targets[s:e])
+            if presolved and (not sol.success or self._keypoint_errors(sol.x, kp_targets[s:e]).max(initial=0.0)
                               > self.config.presolve_retry_per_leg * self.kin.leg_length):
                 # the presolve's chain can start the first window where IPOPT finds no way back to
                 # feasibility (seen on a Bandai walk with the OP3's one-way elbows), or in a bad local

@@ -183,30 +183,35 @@ def walk_timing(qpos: np.ndarray, fps: float, feet: RobotFeet, gait) -> WalkTimi
     trailing foot cannot cross the leading one) and ``gait.turn_per_step_rad`` of turn.  The
     time warp is the largest ratio, over one-second windows, of what the reference asks (its
     speed, or with ``gait.sideways_timing`` its forward and sideways speed in its own heading
-    frame, and its turn rate) to what those steps give, at most ``gait.max_time_warp``.  Where even that slow the robot would fall behind its
-    path, it takes longer steps, up to ``gait.max_advance_per_leg``, and then quicker ones, down
-    to ``gait.min_step_period_s``."""
+    frame, and its turn rate) to what those steps give, at most ``gait.max_time_warp``.  Where
+    even that slow the robot would fall behind its path, it takes longer steps, up to
+    ``gait.max_advance_per_leg``, and then quicker ones, down to ``gait.min_step_period_s``."""
     rates = _path_rates(qpos, fps, gait.step_period_s)
     if not gait.sideways_timing and rates.size:  # the path's speed against forward steps
         rates = np.c_[np.hypot(rates[:, 0], rates[:, 1]), np.zeros(len(rates)), rates[:, 2]]
     cap = float(gait.max_time_warp)
     side_share = 0.5 * (SIDE_STEP_SHARE + INWARD_STEP_SHARE)
 
-    def need(advance: float, period: float, turning: bool = True) -> float:
+    def needs(advance: float, period: float) -> tuple[float, float]:
+        """(how many times slower the path's travel, its turning, must be played for these steps)"""
         if not rates.size:
-            return 1.0
+            return 1.0, 1.0
         step = advance * feet.leg_length
-        capacity = np.array([step, side_share * step, max(gait.turn_per_step_rad, 1e-12)]) / period
-        return float(max(1.0, (rates[:, :3 if turning else 2] / capacity[:3 if turning else 2]).max()))
+        move = max((rates[:, 0] * period / step).max(), (rates[:, 1] * period / (side_share * step)).max())
+        turn = (rates[:, 2] * period / max(gait.turn_per_step_rad, 1e-12)).max()
+        return max(1.0, float(move)), max(1.0, float(turn))
 
     advance, period = float(gait.advance_per_leg), float(gait.step_period_s)
     longest = max(float(gait.max_advance_per_leg), advance)
-    if need(advance, period, turning=False) > cap and longest > advance:  # longer steps do not turn faster
-        advance = min(longest, advance * need(advance, period, turning=False) / cap)
+    move = needs(advance, period)[0]
+    if move > cap and longest > advance:  # longer steps travel faster; they do not turn faster
+        advance = min(longest, advance * move / cap)
     quickest = min(float(gait.min_step_period_s), period)
-    if need(advance, period) > cap and quickest < period:
-        period = max(quickest, period * cap / need(advance, period))
-    return WalkTiming(advance_per_leg=advance, step_period_s=period, time_warp=min(need(advance, period), cap))
+    need = max(needs(advance, period))
+    if need > cap and quickest < period:
+        period = max(quickest, period * cap / need)
+        need = max(needs(advance, period))
+    return WalkTiming(advance_per_leg=advance, step_period_s=period, time_warp=min(need, cap))
 
 
 def swing_progress(n: int, lift_share: float) -> np.ndarray:
