@@ -148,12 +148,26 @@ def time_median(fn: Callable[[], Any], repeat: int = 5, warmup: int = 1, sync: C
 
 
 # -- memory -----------------------------------------------------------------------------------------
-def _rss_bytes() -> int | None:
+def _rss_bytes() -> tuple[int, int] | None:
+    """``(resident set size, its anonymous part)`` in bytes, or None where /proc is missing.
+
+    The anonymous part (heap, numpy and torch buffers) is what a block of code allocates; the
+    rest is mapped files (shared libraries), which the kernel drops and reloads under memory
+    pressure, so the total can fall while a block allocates (CI saw 24 MB of a 40 MB array).
+    """
     try:
-        pages = int(Path("/proc/self/statm").read_text().split()[1])
-        return pages * os.sysconf("SC_PAGE_SIZE")
+        total = int(Path("/proc/self/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE")
     except (OSError, ValueError, IndexError):
         return None
+    anon = None
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("RssAnon:"):
+                anon = int(line.split()[1]) * 1024  # kB
+                break
+    except (OSError, ValueError, IndexError):
+        pass
+    return total, (total if anon is None else anon)
 
 
 def max_rss_mb() -> float:
@@ -169,8 +183,9 @@ class PeakMemory:
     """Context manager measuring peak memory while its block runs.
 
     Attributes after exit (MB): ``rss_peak_mb`` (highest resident set size sampled every
-    ``interval`` s, including torch's CPU allocations), ``rss_increase_mb`` (that peak minus the
-    RSS at entry: what the block itself needed), ``python_peak_mb`` (``tracemalloc`` peak of
+    ``interval`` s, including torch's CPU allocations), ``rss_increase_mb`` (highest anonymous
+    resident memory minus that at entry: what the block itself allocated; mapped files are left
+    out because the kernel may drop them meanwhile), ``python_peak_mb`` (``tracemalloc`` peak of
     Python allocations, when ``python_heap=True``; it slows Python-heavy code), ``cuda_peak_mb``
     (``torch.cuda.max_memory_allocated``, when torch is loaded with CUDA).
     """
@@ -185,10 +200,14 @@ class PeakMemory:
 
     def _sample(self) -> None:
         while not self._stop.is_set():
-            rss = _rss_bytes()
-            if rss is not None:
-                self._peak = max(self._peak, rss)
+            self._update()
             self._stop.wait(self.interval)
+
+    def _update(self) -> None:
+        now = _rss_bytes()
+        if now is not None:
+            self._peak = max(self._peak, now[0])
+            self._anon_peak = max(self._anon_peak, now[1])
 
     def __enter__(self) -> "PeakMemory":
         import sys
@@ -198,8 +217,10 @@ class PeakMemory:
             self._torch.cuda.reset_peak_memory_stats()
         if self.python_heap:
             tracemalloc.start()
-        self._start = _rss_bytes() or 0
-        self._peak = self._start
+        start = _rss_bytes()
+        self._start = start is not None
+        self._peak, self._anon_start = start if start is not None else (0, 0)
+        self._anon_peak = self._anon_start
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._sample, daemon=True)
         self._thread.start()
@@ -208,12 +229,10 @@ class PeakMemory:
     def __exit__(self, *exc) -> None:
         self._stop.set()
         self._thread.join()
-        rss = _rss_bytes()
-        if rss is not None:
-            self._peak = max(self._peak, rss)
+        self._update()
         if self._start:
             self.rss_peak_mb = self._peak / 2**20
-            self.rss_increase_mb = (self._peak - self._start) / 2**20
+            self.rss_increase_mb = (self._anon_peak - self._anon_start) / 2**20
         if self.python_heap:
             self.python_peak_mb = tracemalloc.get_traced_memory()[1] / 2**20
             tracemalloc.stop()
