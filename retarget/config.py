@@ -43,6 +43,17 @@ class ContactConfig:
     #: at a hand-over from one foot to the other, keep the old foot planted until at least this many
     #: frames after the new one touches down (0 = as detected); see contacts.ensure_double_support
     min_double_support: int = 0
+    #: a planted foot pivots about its sole site where the human's foot turns faster than
+    #: ``pivot_speed_deg`` (degrees a second) within a contact phase that turns it more than
+    #: ``pivot_min_turn_deg`` in all (the Bandai spinning kick turns its stance foot 307 degrees;
+    #: the walks' largest turn within one step is 56 degrees, 173 where a walk turns round), by
+    #: up to ``pivot_margin`` times the human foot's turn per frame (the kick's stance foot turns
+    #: up to 33 degrees a frame at 20 fps; at 1.5 the OP3's base caught up by 53 degrees in one
+    #: frame, above validation's 45, at 1.25 by 44.9); elsewhere it holds its yaw (a planted sole
+    #: that could not turn snapped the kick's base 158 degrees in one frame)
+    pivot_speed_deg: float = 120.0
+    pivot_min_turn_deg: float = 120.0
+    pivot_margin: float = 1.25
 
 
 @dataclass(frozen=True)

@@ -37,8 +37,11 @@ contact, the midpoint of both in double support.
   the ground and flat), ``>= ground`` otherwise, plus the 4th corner ``>= ground`` out of
   contact (in contact it lies on the plane of the other three);
 * per sole, no slip between consecutive contact frames: sole-site ``xy`` unchanged and the
-  sole edge direction unchanged (``cross_z = 0``); chained across the seam to the committed
-  frame before the window;
+  sole edge direction unchanged (``cross_z = 0`` with a positive dot product: a sole flipped
+  half a turn also has ``cross_z = 0``); a planted foot that pivots (the human's turns fast,
+  ``ContactConfig.pivot_speed_deg``) may turn about its sole site by up to ``pivot`` per frame
+  (``|cross_z| <= |e|^2 sin(pivot)``); chained across the seam to the committed frame before
+  the window;
 * swing foot (bounds on the same rows, from :mod:`retarget.swing`): out of contact all four
   corners at least a clearance above the ground that rises from lift-off and falls to
   touch-down; in the swing frame next to a contact frame the corners lie in a thin band
@@ -313,7 +316,8 @@ class StageFunctions:
             pc = prev_corners[:, 4 * side_i : 4 * side_i + 4]
             e_prev = pc[:2, 1] - pc[:2, 0]
             g.append(e_now[0] * e_prev[1] - e_now[1] * e_prev[0])
-            names += [f"{side} sole yaw slip"]
+            g.append(e_now[0] * e_prev[0] + e_now[1] * e_prev[1])
+            names += [f"{side} sole yaw slip", f"{side} sole yaw flip"]
         # lateral distance of the left sole site from the right one, across the human heading
         d = sole[:2, 0] - sole[:2, 1]
         g.append(-ca.sin(heading) * d[0] + ca.cos(heading) * d[1])
@@ -494,6 +498,9 @@ class WindowProblem:
                 self.cache_status = cache.store(key, functions, names, self._n_clearance, kin.nominal_x)
         self._ng_frame = len(names)
         self._names = list(names) * W
+        corners = np.array(kin.frame(kin.nominal_x)[3]).T.reshape(2, 4, 3)
+        edge = corners[:, 1, :2] - corners[:, 0, :2]
+        self._edge2 = (edge ** 2).sum(axis=1)  # per sole, the squared corner 0 -> 1 edge (yaw rows' scale)
         opts = {
             "print_time": False,
             "calc_lam_p": False,
@@ -537,6 +544,7 @@ class WindowProblem:
         flat_tolerance: float = 0.0,
         transition_step: float = np.inf,
         min_separation: float = -np.inf,
+        pivot: np.ndarray | None = None,
     ):
         """Bounds ``(lbg, ubg)`` for a window's contact mask ``[W, 2]`` and the contact state of the
         frame before it (``None`` = no committed frame before the window).
@@ -547,7 +555,9 @@ class WindowProblem:
         ``transition_step`` (m): largest horizontal sole-site move between a contact frame and
         the swing frame next to it (lift-off and touch-down; ``inf`` = free); ``min_separation``
         (m): smallest lateral distance of the left sole site from the right one, measured across
-        the human heading (``-inf`` = free; keeps the feet from crossing into each other).
+        the human heading (``-inf`` = free; keeps the feet from crossing into each other);
+        ``pivot[W, 2]`` (rad, optional): how far a planted sole may turn from the frame before
+        (0 = not at all).
         """
         nj = self.kin.nj
         lb, ub = [], []
@@ -569,13 +579,14 @@ class WindowProblem:
                     ub.append(np.full(4, high))
                 before = bool(contacts[t - 1, s]) if t > 0 else (prev_contact is not None and bool(prev_contact[s]))
                 if on and before:
-                    slip = 0.0
-                elif has_prev and on != before:
-                    slip = transition_step
-                else:
-                    slip = inf
-                lb.append(np.array([-slip, -slip, -inf if slip > 0 else 0.0]))
-                ub.append(np.array([slip, slip, inf if slip > 0 else 0.0]))
+                    turn = min(float(pivot[t, s]), 1.5) if pivot is not None else 0.0
+                    twist = self._edge2[s] * np.sin(turn)
+                    lb.append(np.array([0.0, 0.0, -twist, 0.0]))
+                    ub.append(np.array([0.0, 0.0, twist, inf]))
+                    continue
+                slip = transition_step if has_prev and on != before else inf
+                lb.append(np.array([-slip, -slip, -inf, -inf]))
+                ub.append(np.array([slip, slip, inf, inf]))
             lb.append([min_separation])
             ub.append([inf])
             if self._n_clearance:
@@ -600,14 +611,15 @@ class WindowProblem:
         transition_step: float = np.inf,
         fps: float = 20.0,
         min_separation: float = -np.inf,
+        pivot: np.ndarray | None = None,
     ) -> WindowSolution:
         """Solve one window.
 
         ``x0[W, nx]`` warm start; ``targets[W, K, 3]`` (m); ``heading[W]`` (rad); ``foot_dir[W, 2, 2]``;
         ``contacts[W, 2]`` bool; ``history[2, nx]`` the two committed frames before the window (or None);
         ``prev_contact[2]`` contact state of the frame before; ``vel_step[nj]`` max joint change per frame (rad);
-        ``clearance[W, 2]``, ``flat[W, 2]``, ``flat_tolerance``, ``transition_step``: swing-foot
-        bounds, see :meth:`constraint_bounds`; ``fps`` frames per second (for the ZMP term).
+        ``clearance[W, 2]``, ``flat[W, 2]``, ``flat_tolerance``, ``transition_step``, ``pivot``:
+        foot bounds, see :meth:`constraint_bounds`; ``fps`` frames per second (for the ZMP term).
         """
         import time
 
@@ -625,7 +637,7 @@ class WindowProblem:
             ]
         )
         lbg, ubg = self.constraint_bounds(contacts, None if history is None else prev_contact, vel_step, ground,
-                                          clearance, flat, flat_tolerance, transition_step, min_separation)
+                                          clearance, flat, flat_tolerance, transition_step, min_separation, pivot)
         lbx, ubx = self.lbx.copy(), self.ubx.copy()
         yaw_ref = np.asarray(heading, dtype=np.float64).ravel() + self.kin.nominal_x[3]
         lbx[3::nx] = yaw_ref - self.solver_config.max_yaw_offset

@@ -173,15 +173,20 @@ class Retargeter:
         n = self.config.presolve_frames
         return n if self.config.mode == "trajectory" and 2 <= n < first_window else 0
 
-    def _swing_bounds(self, contacts: np.ndarray, fps: float) -> dict:
-        """Swing-foot keyword arguments of :meth:`WindowProblem.solve` for the whole clip."""
+    def _swing_bounds(self, contacts: np.ndarray, fps: float, foot_dir: np.ndarray) -> dict:
+        """Foot keyword arguments of :meth:`WindowProblem.solve` for the whole clip (swing bounds,
+        feet apart, pivots of planted feet from the human foot directions ``foot_dir`` [T, 2, 2])."""
         sw = self.config.swing
         gap = self.config.min_foot_gap
         sep = -np.inf if gap is None else self._sole_width() + gap * self.kin.leg_length
+        cc = self.config.contacts
+        pivot = pivot_allowance(foot_dir, fps, contacts, cc.pivot_speed_deg, cc.pivot_min_turn_deg, cc.pivot_margin)
         if sw.height <= 0:
-            return {"clearance": None, "flat": None, "flat_tolerance": 0.0, "transition_step": np.inf, "min_separation": sep}
+            return {"clearance": None, "flat": None, "flat_tolerance": 0.0, "transition_step": np.inf, "min_separation": sep,
+                    "pivot": pivot}
         return {
             "min_separation": sep,
+            "pivot": pivot,
             "clearance": swing_clearance(contacts, fps, sw),
             "flat": transition_frames(contacts),
             "flat_tolerance": sw.flat_tolerance,
@@ -252,7 +257,7 @@ class Retargeter:
         kp_idx = [JOINT_NAMES.index(k.human_joint) for k in self.robot.keypoints]
         kp_targets = targets.joints[:, kp_idx, :]  # [T, K, 3]
         vel_step = self.robot.velocity_limit * cfg.velocity_margin / fps
-        swing = self._swing_bounds(contacts, fps)
+        swing = self._swing_bounds(contacts, fps, targets.foot_dir)
 
         x = np.zeros((T, self.kin.nx))
         known = np.zeros(T, dtype=bool)  # frames with a solved value (committed or look-ahead)
@@ -426,6 +431,39 @@ class Retargeter:
         idx = self._root_index()
         pts = [self.kin.nominal_sites[self.robot.keypoints[i].human_joint] for i in idx]
         return np.mean(pts, axis=0) if pts else self.kin.nominal_x[:3]
+
+
+def pivot_allowance(foot_dir: np.ndarray, fps: float, contacts: np.ndarray, speed_deg: float, min_turn_deg: float,
+                    margin: float) -> np.ndarray:
+    """[T, 2] rad: how far each planted robot sole may turn from the frame before: ``margin``
+    times the human foot's turn (``foot_dir`` [T, 2, 2], unit horizontal directions) in frames
+    where that foot turns faster than ``speed_deg`` degrees a second within a contact phase
+    (``contacts`` [T, 2]) over which it turns more than ``min_turn_deg`` in all (a pivot on the
+    stance foot, as in a spinning kick), else 0 (the sole holds its yaw; a walking foot's
+    direction also swings at heel strike and toe-off, by up to 25 degrees on the Bandai walks)."""
+    foot_dir = np.asarray(foot_dir, dtype=np.float64)
+    contacts = np.asarray(contacts, dtype=bool)
+    T = foot_dir.shape[0]
+    out = np.zeros((T, 2))
+    if T < 2:
+        return out
+    angle = np.unwrap(np.arctan2(foot_dir[..., 1], foot_dir[..., 0]), axis=0)
+    turn = np.r_[np.zeros((1, 2)), np.abs(np.diff(angle, axis=0))]
+    fast = turn * fps > np.radians(speed_deg)
+    for k in range(2):
+        t = 0
+        while t < T:
+            if not contacts[t, k]:
+                t += 1
+                continue
+            u = t
+            while u + 1 < T and contacts[u + 1, k]:
+                u += 1
+            if t + 1 <= u and np.ptp(angle[t:u + 1, k]) > np.radians(min_turn_deg):
+                phase = slice(t + 1, u + 1)  # frames planted after a planted frame
+                out[phase, k] = np.where(fast[phase, k], margin * turn[phase, k], 0.0)
+            t = u + 1
+    return out
 
 
 def _heading_local(v: np.ndarray, heading: np.ndarray) -> np.ndarray:

@@ -663,3 +663,87 @@ def test_bvh_mocap_input_is_imported_and_retargeted(robot, small, tmp_path):
     assert motion.joints.shape == (30, 22, 3) and motion.fps == 20.0
     res = small.run(motion.joints, motion.fps, progress=False)
     assert res.success and res.qpos.shape == (30, robot.nq)
+
+
+def _spin_on_the_left_foot(T: int = 40, turn_deg: float = 150.0, frames: int = 12) -> np.ndarray:
+    """The human rest pose with the right foot lifted 0.15 m, turning ``turn_deg`` about the
+    vertical through the left ankle over ``frames`` frames (from frame 10): the stance foot
+    pivots in place, as in a spinning kick."""
+    J = JOINT_INDEX
+    rest = rest_pose()
+    for name in ("right_ankle", "right_foot"):
+        rest[J[name], 2] += 0.15
+    rest[J["right_knee"]] += [0.08, 0.0, 0.08]
+    axis = rest[J["left_ankle"]].copy()
+    yaw = np.radians(turn_deg) * np.clip((np.arange(T) - 10) / frames, 0.0, 1.0)
+    out = np.zeros((T, 22, 3))
+    rel = rest - [axis[0], axis[1], 0.0]
+    for t in range(T):
+        c, s = np.cos(yaw[t]), np.sin(yaw[t])
+        out[t] = np.c_[axis[0] + c * rel[:, 0] - s * rel[:, 1], axis[1] + s * rel[:, 0] + c * rel[:, 1], rel[:, 2]]
+    return out
+
+
+def _sole_yaws(robot: RetargetRobot, qpos: np.ndarray) -> np.ndarray:
+    """[T, 2] unwrapped yaw (deg) of each sole's corner 0 -> 1 edge."""
+    data = mujoco.MjData(robot.model)
+    ids = [[mujoco.mj_name2id(robot.model, mujoco.mjtObj.mjOBJ_SITE, robot.soles[side].corner_sites[i]) for i in (0, 1)]
+           for side in ("left", "right")]
+    out = np.zeros((len(qpos), 2))
+    for t, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(robot.model, data)
+        for k, (a, b) in enumerate(ids):
+            e = data.site_xpos[b] - data.site_xpos[a]
+            out[t, k] = np.arctan2(e[1], e[0])
+    return np.degrees(np.unwrap(out, axis=0))
+
+
+def test_a_planted_foot_pivots_only_where_the_human_foot_turns_fast_and_far():
+    from retarget.solve import pivot_allowance
+
+    fps = 20.0
+    # planted throughout: still, a 150-degree turn at 600 deg/s, still, 10 degrees at 40 deg/s
+    angle = np.radians(np.r_[np.zeros(5), np.linspace(0, 150, 6), np.full(5, 150.0), 150 + np.linspace(0, 10, 6)])
+    foot_dir = np.stack([np.cos(angle), np.sin(angle)], axis=-1)[:, None].repeat(2, axis=1)
+    planted = np.ones((len(angle), 2), dtype=bool)
+    pivot = pivot_allowance(foot_dir, fps, planted, speed_deg=120.0, min_turn_deg=120.0, margin=1.5)
+    assert pivot.shape == (len(angle), 2)
+    np.testing.assert_allclose(np.degrees(pivot[6:11, 0]), 1.5 * 30.0, atol=1e-6)
+    assert not pivot[:6].any() and not pivot[11:].any()
+    # the same fast turn split over two contact phases of 75 degrees each (a walk's heel strike
+    # and toe-off swing the foot's direction quickly, but not far): held
+    split = planted.copy()
+    split[8] = False
+    assert not pivot_allowance(foot_dir, fps, split, speed_deg=120.0, min_turn_deg=120.0, margin=1.5).any()
+
+
+def test_a_stance_foot_pivots_with_a_spinning_human_and_never_flips(robot):
+    human = _spin_on_the_left_foot()
+    held = Retargeter(robot, replace(SMALL, contacts=replace(SMALL.contacts, pivot_speed_deg=1e6)))
+    res_held = held.run(human, 20.0, progress=False)
+    res = Retargeter(robot, SMALL).run(human, 20.0, progress=False)
+    assert res.success, res.solver_status()
+    assert res.contacts[:, 0].all()  # the left foot stays planted throughout
+    # the pivoting sole turns with the human (150 degrees) about its sole site
+    yaws = _sole_yaws(robot, res.qpos)[:, 0]
+    assert yaws[-1] - yaws[0] > 120, yaws[-1] - yaws[0]
+    # held, the sole cannot follow: the solve fails on the flip it would need (half a turn round
+    # keeps the sole's edge parallel, which the yaw-slip row alone allowed), and says so
+    assert not res_held.success
+    assert any("sole yaw flip" in (w.violated or "") for w in res_held.windows)
+    data = mujoco.MjData(robot.model)
+    site = mujoco.mj_name2id(robot.model, mujoco.mjtObj.mjOBJ_SITE, robot.soles["left"].site)
+    centre = []
+    for q in res.qpos:
+        data.qpos[:] = q
+        mujoco.mj_kinematics(robot.model, data)
+        centre.append(data.site_xpos[site, :2].copy())
+    assert np.linalg.norm(np.asarray(centre) - centre[0], axis=1).max() < 1e-3  # it turns about its sole site
+    # neither the sole nor the base turns more than 45 degrees between two frames (a sole
+    # flipped half a turn round also keeps its edge parallel)
+    assert np.abs(np.diff(yaws)).max() < 45
+    base_yaw = np.degrees(np.unwrap([float(np.arctan2(2 * (q[0] * q[3] + q[1] * q[2]), 1 - 2 * (q[2] ** 2 + q[3] ** 2)))
+                                     for q in res.qpos[:, 3:7]]))
+    assert np.abs(np.diff(base_yaw)).max() < 45
+    assert abs(base_yaw[-1] - base_yaw[0] - 150) < 25  # the robot faces where the human ends up facing
