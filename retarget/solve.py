@@ -373,7 +373,7 @@ class Retargeter:
         import mujoco
 
         m = self.robot.model
-        return "|".join(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom {g}" for g in pair)
+        return "|".join(geom_label(m, g) for g in pair)
 
     def _warm_start(self, x, known, s, e, targets: HumanTargets, kp_targets) -> np.ndarray:
         """Initial guess for frames ``[s, e)``: earlier solutions where they exist; otherwise the
@@ -431,6 +431,18 @@ class Retargeter:
         idx = self._root_index()
         pts = [self.kin.nominal_sites[self.robot.keypoints[i].human_joint] for i in idx]
         return np.mean(pts, axis=0) if pts else self.kin.nominal_x[:3]
+
+
+def geom_label(model, g: int) -> str:
+    """A geom's name, or for an unnamed one (every geom of Menagerie's OP3) its body's name and
+    its number, ``"l_el_link/18"``."""
+    import mujoco
+
+    name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
+    if name:
+        return name
+    body = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, int(model.geom_bodyid[g])) or f"body {model.geom_bodyid[g]}"
+    return f"{body}/{g}"
 
 
 def pivot_allowance(foot_dir: np.ndarray, fps: float, contacts: np.ndarray, speed_deg: float, min_turn_deg: float,

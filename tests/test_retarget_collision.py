@@ -153,3 +153,11 @@ def test_collision_config_off_is_the_old_behaviour(robot):
     rt = Retargeter(robot, cfg)
     rt.run(human, 20.0, progress=False)
     assert all(pairs == () for _, pairs in rt._problems)  # no problem with collision rows was ever built
+
+
+def test_an_unnamed_geom_is_labelled_by_its_body_and_number():
+    from retarget.solve import geom_label
+
+    model = mujoco.MjModel.from_xml_string("""<mujoco><worldbody><body name="arm"><geom name="hand" size="0.1"/>
+      <geom size="0.05" pos="0 0 0.2"/></body></worldbody></mujoco>""")
+    assert [geom_label(model, g) for g in range(model.ngeom)] == ["hand", "arm/1"]
