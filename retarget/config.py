@@ -48,9 +48,9 @@ class ContactConfig:
     #: ``pivot_min_turn_deg`` in all (the Bandai spinning kick turns its stance foot 307 degrees;
     #: the walks' largest turn within one step is 56 degrees, 173 where a walk turns round), by
     #: up to ``pivot_margin`` times the human foot's turn per frame (the kick's stance foot turns
-    #: up to 33 degrees a frame at 20 fps; at 1.5 the OP3's base caught up by 53 degrees in one
-    #: frame, above validation's 45, at 1.25 by 44.9); elsewhere it holds its yaw (a planted sole
-    #: that could not turn snapped the kick's base 158 degrees in one frame)
+    #: up to 33 degrees a frame at 20 fps; the base's own turn is bounded by
+    #: ``SolverConfig.max_base_turn_speed_deg``); elsewhere it holds its yaw (a planted sole that
+    #: could not turn snapped the kick's base 158 degrees in one frame)
     pivot_speed_deg: float = 120.0
     pivot_min_turn_deg: float = 120.0
     pivot_margin: float = 1.25
@@ -135,6 +135,10 @@ class SolverConfig:
     mu_init: float = 1e-2  # the primal start is close (previous window / previous frame)
     max_tilt: float = 1.0  # rad; bound on base pitch and roll (Euler singular at pi/2, see problem.py)
     max_yaw_offset: float = 1.2  # rad; bound on |base yaw - human heading| (no turning the wrong way round)
+    #: deg/s; bound on the base's turn between frames (36 degrees a frame at 20 fps; the Bandai
+    #: spinning kick's human turns at up to 660 deg/s, and a robot base that lagged it caught up
+    #: by 53 degrees in one frame, which validation's base_continuity check fails above 45)
+    max_base_turn_speed_deg: float = 720.0
     base_height_range: tuple = (0.3, 1.6)  # base z bounds as fractions of the nominal base height
     extra: tuple = ()  # further (name, value) IPOPT options, e.g. (("print_level", 5),)
 

@@ -33,6 +33,8 @@ contact, the midpoint of both in double support.
 **Constraints** ``g`` per frame (bounds chosen per call, so contact phases need no rebuild):
 
 * joint velocity: ``x_j[t] - x_j[t-1]`` within ``+-velocity_limit * dt`` (also across the seam);
+  and the base's turn ``yaw[t] - yaw[t-1]`` within ``+-SolverConfig.max_base_turn_speed_deg * dt``
+  (a base that lagged a spinning human caught up by 53 degrees in one frame);
 * per sole, 3 corner heights: ``= ground`` in contact (three corners fix the sole plane: on
   the ground and flat), ``>= ground`` otherwise, plus the 4th corner ``>= ground`` out of
   contact (in contact it lies on the plane of the other three);
@@ -305,6 +307,8 @@ class StageFunctions:
         if velocity_constraints:
             g.append(xt[6:] - prev[6:])
             names += [f"joint {n} velocity" for n in robot.joint_names]
+            g.append(xt[3] - prev[3])
+            names += ["base yaw turn"]
         prev_sole, prev_corners = prev_frame[1], prev_frame[3]
         for side_i, side in enumerate(SIDES):
             c = corners[:, 4 * side_i : 4 * side_i + 4]
@@ -545,6 +549,7 @@ class WindowProblem:
         transition_step: float = np.inf,
         min_separation: float = -np.inf,
         pivot: np.ndarray | None = None,
+        yaw_step: float = np.inf,
     ):
         """Bounds ``(lbg, ubg)`` for a window's contact mask ``[W, 2]`` and the contact state of the
         frame before it (``None`` = no committed frame before the window).
@@ -557,7 +562,7 @@ class WindowProblem:
         (m): smallest lateral distance of the left sole site from the right one, measured across
         the human heading (``-inf`` = free; keeps the feet from crossing into each other);
         ``pivot[W, 2]`` (rad, optional): how far a planted sole may turn from the frame before
-        (0 = not at all).
+        (0 = not at all); ``yaw_step`` (rad): how far the base may turn from the frame before.
         """
         nj = self.kin.nj
         lb, ub = [], []
@@ -565,8 +570,8 @@ class WindowProblem:
         for t in range(self.W):
             has_prev = t > 0 or prev_contact is not None
             if self.velocity_constraints:
-                lb.append(-vel_step if has_prev else np.full(nj, -inf))
-                ub.append(vel_step if has_prev else np.full(nj, inf))
+                lb.append(np.r_[-vel_step, -yaw_step] if has_prev else np.full(nj + 1, -inf))
+                ub.append(np.r_[vel_step, yaw_step] if has_prev else np.full(nj + 1, inf))
             for s in range(2):
                 on = bool(contacts[t, s])
                 if on:
@@ -637,7 +642,8 @@ class WindowProblem:
             ]
         )
         lbg, ubg = self.constraint_bounds(contacts, None if history is None else prev_contact, vel_step, ground,
-                                          clearance, flat, flat_tolerance, transition_step, min_separation, pivot)
+                                          clearance, flat, flat_tolerance, transition_step, min_separation, pivot,
+                                          np.radians(self.solver_config.max_base_turn_speed_deg) / fps)
         lbx, ubx = self.lbx.copy(), self.ubx.copy()
         yaw_ref = np.asarray(heading, dtype=np.float64).ravel() + self.kin.nominal_x[3]
         lbx[3::nx] = yaw_ref - self.solver_config.max_yaw_offset
