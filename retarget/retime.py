@@ -63,7 +63,18 @@ def hold_ends(trajectory: RobotTrajectory, before: int, after: int) -> RobotTraj
     before, after = max(0, int(before)), max(0, int(after))
     if before == 0 and after == 0:
         return replace(trajectory)
-    index = np.r_[np.zeros(before, dtype=int), np.arange(T), np.full(after, T - 1, dtype=int)]
+    return hold_frames(trajectory, np.r_[np.zeros(before, dtype=int), np.arange(T), np.full(after, T - 1, dtype=int)])
+
+
+def hold_frames(trajectory: RobotTrajectory, frames: np.ndarray) -> RobotTrajectory:
+    """``trajectory`` played through the frame indices ``frames`` (non-decreasing, each frame
+    at least once): a repeated index holds that pose, a pause in the motion that does not
+    change its speed (``retime_factor`` stays)."""
+    frames = np.asarray(frames, dtype=int)
+    T = trajectory.qpos.shape[0]
+    if frames.ndim != 1 or (frames.size and (frames[0] != 0 or frames[-1] != T - 1
+                                             or np.any(~np.isin(np.diff(frames), (0, 1))))):
+        raise ValueError("hold_frames: frames must run from 0 to the last frame in steps of 0 or 1")
     return replace(
-        trajectory, qpos=np.asarray(trajectory.qpos)[index], contacts=np.asarray(trajectory.contacts)[index],
-        keypoint_error=np.asarray(trajectory.keypoint_error)[index], source=np.asarray(trajectory.source)[index])
+        trajectory, qpos=np.asarray(trajectory.qpos)[frames], contacts=np.asarray(trajectory.contacts)[frames],
+        keypoint_error=np.asarray(trajectory.keypoint_error)[frames], source=np.asarray(trajectory.source)[frames])

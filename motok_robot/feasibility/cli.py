@@ -43,6 +43,9 @@ def register(commands, groups) -> None:
                              "op3 sets 0.75)")
     parser.add_argument("--no-foothold-tracking", action="store_true",
                         help="with --own-steps: do not correct each step from the measured last one (leg odometry)")
+    parser.add_argument("--spot-steps", action="store_true",
+                        help="a motion on the spot that lifts a foot: plan its own steps with the weight moved onto "
+                             "the stance foot first (experimental, off by default; docs/feasibility.md)")
     parser.add_argument("--no-balance", action="store_true", help="no balance controller (open-loop goals)")
     parser.add_argument("--refine", action="store_true", help="refine the goals by predictive sampling (slower)")
     parser.add_argument("--samples", type=int, default=None, help="refinement: rollouts per planning step (default 16)")
@@ -67,6 +70,8 @@ def run_feasible(args) -> int:
         settings["zmp_shift"] = False
     if args.refine:
         settings["refine"] = True
+    if args.spot_steps:
+        settings["spot_steps"] = {"enabled": True}
     if args.no_balance:
         settings["balance"] = {"enabled": False}
     if args.no_foothold_tracking:
@@ -110,6 +115,10 @@ def run_feasible(args) -> int:
           + clearance_note((walk or {}).get("arm_clearance"))
           + (f", played {slow['factor']:.2f}x slower for the servos' torque (needed {slow['torque_share_before']:.2f} "
              f"of a limit, now {slow['torque_share_after']:.2f})" if slow and slow["factor"] > 1 else ""))
+    spot = rec.get("spot_steps")
+    if spot:
+        print(f"  spot steps: {spot['steps']} swing(s), paused {spot.get('pause_s', 0.0):.2f} s to move the weight"
+              if spot["steps"] else f"  spot steps: none ({spot['reason']})")
     if config.gait.enabled and not walk:
         print("  --own-steps: the motion does not travel (or lifts a foot higher than a step): its legs are kept")
     print(f"  executed from rest{' with the balance controller' if result.plan is not None else ' open loop'}: "

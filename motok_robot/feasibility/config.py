@@ -240,6 +240,52 @@ class GaitConfig:
 
 
 @dataclass(frozen=True)
+class SpotStepConfig:
+    """The steps of a motion on the spot that lifts a foot (:mod:`.spot_steps`)."""
+
+    #: plan the reference's own lift-offs with the weight moved onto the stance foot first
+    #: (False: a motion on the spot keeps its retargeted legs, with the ZMP shift).  Off by
+    #: default: the real Bandai kick, the one real clip it changes, still falls on both OP3
+    #: models with it (later: op3 5.3 -> 9.0 s, op3_like 5.4 -> 9.0 s of 36-46 s;
+    #: docs/experiments/2026-12-06-spinning-kick-pivot-and-collision-resolve.md)
+    enabled: bool = False
+    #: a foot that moves faster than this along the floor (leg lengths a second; 0.2 on the OP3
+    #: = 4.8 cm/s) is not down: the robot steps where the human shuffled it
+    slide_speed_per_leg: float = 0.2
+    #: the shortest swing (a shorter lift-off is lengthened: a shuffle becomes a step) and the
+    #: shortest stance between two swings (a shorter one joins them), in seconds
+    min_swing_s: float = 0.3
+    min_stance_s: float = 0.15
+    #: a swing starts at least this long after the other foot's touchdown (s): the ZMP moves
+    #: across in that time (a human lands a kick while its stance foot already slides on)
+    min_double_support_s: float = 0.25
+    #: a swing foot rises at least this high at mid-swing, per leg length (0.06 on the OP3 = 1.4 cm)
+    clearance_per_leg: float = 0.06
+    #: the ZMP moves onto the stance foot over this long before a lift-off, and back between
+    #: the feet over as long after the touchdown (s)
+    transfer_s: float = 0.4
+    #: a double support lasts long enough for the ZMP to move onto the next stance foot at this
+    #: speed (leg lengths a second; 0.5 on the OP3 = 12 cm/s): the reference pauses where not
+    zmp_speed_per_leg: float = 0.5
+    #: a foothold lies at most this far ahead of or behind the other foot's (per leg length;
+    #: 0.25 on the OP3 = 6 cm)
+    max_stagger_per_leg: float = 0.25
+    #: a motion with both feet higher than this (per leg length; 0.05 on the OP3 = 1.2 cm) in
+    #: one frame hops: it has no spot steps
+    hop_height_per_leg: float = 0.05
+
+    def __post_init__(self):
+        _check_ranges("spot_steps", self, (("slide_speed_per_leg", 0.01, 5.0), ("min_swing_s", 0.0, 2.0),
+                                           ("min_stance_s", 0.0, 2.0), ("min_double_support_s", 0.0, 2.0),
+                                           ("clearance_per_leg", 0.0, 0.5),
+                                           ("transfer_s", 0.02, 2.0), ("hop_height_per_leg", 0.0, 1.0),
+                                           ("zmp_speed_per_leg", 0.05, 10.0), ("max_stagger_per_leg", 0.0, 2.0)))
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
 class FeasibilityConfig:
     """The whole stage (:mod:`motok_robot.feasibility.stage`)."""
 
@@ -268,6 +314,7 @@ class FeasibilityConfig:
     balance: BalanceConfig = field(default_factory=BalanceConfig)
     refine_config: RefineConfig = field(default_factory=RefineConfig)
     gait: GaitConfig = field(default_factory=GaitConfig)
+    spot_steps: SpotStepConfig = field(default_factory=SpotStepConfig)
 
     def __post_init__(self):
         if not 1.0 <= float(self.retime) <= 4.0:

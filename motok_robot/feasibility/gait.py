@@ -159,14 +159,15 @@ def generate_gait(index, qpos: np.ndarray, fps: float, schedule: StepSchedule, *
                   max_drop_fraction: float = 0.2, velocity_fraction: float = 0.9,
                   speed_limit: np.ndarray | None = None,
                   base_yaw: np.ndarray | None = None, zmp_transfer_share: float = 1.0,
-                  height_window_s: float = 0.0) -> GaitResult:
+                  height_window_s: float = 0.0, zmp: np.ndarray | None = None) -> GaitResult:
     """The task trajectory [T, nq] walking ``schedule`` with the upper body, base height and
     orientation of reference ``qpos`` [T, nq] at ``fps`` (see the module docstring); with
     ``base_yaw`` [T] (rad) the base turns with it instead of the reference's (a human's pelvis
     swings its heading with every step; on a robot's stance foot that swing is a twist); with
     ``height_window_s`` > 0 the base height is the reference's smoothed over that window (a
     human's pelvis also bobs with every one of its steps, which the robot's steps do not share);
-    ``zmp_transfer_share``: see :func:`zmp_reference`."""
+    ``zmp_transfer_share``: see :func:`zmp_reference`; ``zmp`` [T, 2]: the ZMP reference to
+    use instead of :func:`zmp_reference`'s (a motion on the spot, :mod:`.spot_steps`)."""
     qpos = np.asarray(qpos, dtype=np.float64).copy()
     if base_yaw is not None:
         qpos[:, 3:7] = with_yaw(qpos[:, 3:7], base_yaw)
@@ -175,7 +176,7 @@ def generate_gait(index, qpos: np.ndarray, fps: float, schedule: StepSchedule, *
     T = qpos.shape[0]
     foot_pos, foot_quat = schedule.foot_pos, schedule.foot_quat
     com = _com(index, qpos)
-    zmp = zmp_reference(schedule, zmp_transfer_share)
+    zmp = zmp_reference(schedule, zmp_transfer_share) if zmp is None else np.asarray(zmp, dtype=np.float64)
     # CoM path at rate_hz over the clip, sampled back at the frames
     n = max(4, int(round((T - 1) / fps * rate_hz)) + 1)
     times = np.linspace(0, (T - 1) / fps, n)

@@ -45,6 +45,7 @@ from motok_robot.feasibility.feedforward import GOALS_FILE, feedforward_goals, s
 from motok_robot.feasibility.physics import execute, servo_model
 from motok_robot.feasibility.refine import refine_goals
 from motok_robot.feasibility.stepping import build_stepping
+from motok_robot.feasibility.spot_steps import plan_spot_steps
 from motok_robot.feasibility.zmp_shift import shift_com
 
 RECORD_FILE = "feasibility.json"
@@ -104,26 +105,62 @@ def first_lifted_foot(contacts: np.ndarray) -> int:
     return 1
 
 
-def _spot_task(trajectory, index, config) -> tuple[np.ndarray, dict]:
-    """The task of a motion that is not walked: its CoM moved so the cart-table ZMP stays on
-    its feet (:mod:`.zmp_shift`) when ``config.zmp_shift``, else the motion itself."""
+@dataclass
+class SpotTask:
+    """What the stage asks of a motion that is not walked (:func:`_spot_task`)."""
+
+    trajectory: object               # the reference, played slower where the task needed it (and
+    #                                  with the spot steps' pauses)
+    task: np.ndarray                 # [T, nq]
+    record: dict
+    contacts: np.ndarray | None      # [T, 2] planned support phases (None: the task's own)
+    loaded: np.ndarray | None        # [T, 2] feet planned to carry weight (None: every foot down)
+
+
+def _spot_task(trajectory, index, config) -> SpotTask:
+    """The task of a motion that is not walked: where it lifts a foot, its own steps with the
+    weight moved onto the stance foot first (:mod:`.spot_steps`, when
+    ``config.spot_steps.enabled``; the trajectory then pauses where the weight needs the time);
+    else its CoM moved so the cart-table ZMP stays on its feet (:mod:`.zmp_shift`) when
+    ``config.zmp_shift``; else the motion itself (contacts None: the task's own)."""
+    from retarget.retime import hold_frames
+
     reference = np.asarray(trajectory.qpos, dtype=np.float64)
+    fps = float(trajectory.fps)
+    record: dict = {}
+    if config.spot_steps.enabled:
+        s = config.spot_steps
+        spot = plan_spot_steps(index, reference, fps, contact_height_m=config.contact_height_m,
+                               slide_speed_per_leg=s.slide_speed_per_leg, min_swing_s=s.min_swing_s,
+                               min_stance_s=s.min_stance_s, min_double_support_s=s.min_double_support_s,
+                               clearance_per_leg=s.clearance_per_leg, transfer_s=s.transfer_s,
+                               hop_height_per_leg=s.hop_height_per_leg, zmp_speed_per_leg=s.zmp_speed_per_leg,
+                               max_stagger_per_leg=s.max_stagger_per_leg)
+        record["spot_steps"] = spot.record(fps)
+        if spot.schedule is not None:
+            held = hold_frames(trajectory, spot.frames)
+            gait = config.gait
+            walk = generate_gait(index, np.asarray(held.qpos, dtype=np.float64), fps, spot.schedule, zmp=spot.zmp,
+                                 speed_limit=damping_speed_limit(index, gait.damping_speed_share)
+                                 if gait.damping_speed_share > 0 else None)
+            record["spot_steps"].update(walk.record())
+            return SpotTask(held, walk.qpos, record, spot.schedule.contacts, spot.schedule.loaded)
     if not config.zmp_shift:
-        return reference, {}
+        return SpotTask(trajectory, reference, record, None, None)
     contacts = sole_contacts(index, reference, config.contact_height_m)
-    shifted = shift_com(index, reference, float(trajectory.fps), contacts, margin_m=config.zmp_margin_m,
-                        axes=config.zmp_axes)
-    return shifted.qpos, {"zmp_shift": shifted.record()}
+    shifted = shift_com(index, reference, fps, contacts, margin_m=config.zmp_margin_m, axes=config.zmp_axes)
+    return SpotTask(trajectory, shifted.qpos, {**record, "zmp_shift": shifted.record()}, None, None)
 
 
-def torque_share(index, task: np.ndarray, fps: float, config) -> float:
-    """The largest required torque of ``task`` [T, nq] over any joint, as a share of its limit."""
-    torque = required_torque(index, task, fps, config.contact_height_m, config.friction)[2]
+def torque_share(index, task: np.ndarray, fps: float, config, loaded: np.ndarray | None = None) -> float:
+    """The largest required torque of ``task`` [T, nq] over any joint, as a share of its limit
+    (``loaded``: the feet planned to carry weight, :func:`~.dynamics.required_torque`)."""
+    torque = required_torque(index, task, fps, config.contact_height_m, config.friction, loaded=loaded)[2]
     return float((np.abs(torque) / np.maximum(index.torque_limit, 1e-9)).max()) if torque.size else 0.0
 
 
-def torque_feasible_task(trajectory, index, config, tries: int = 4):
-    """(trajectory, task, record) of a motion that is not walked, played slower where its task
+def torque_feasible_task(trajectory, index, config, tries: int = 4) -> SpotTask:
+    """The task of a motion that is not walked (:func:`_spot_task`), played slower where it
     needs more than ``config.max_torque_share`` of a servo's torque and it does not travel
     (:func:`walks`; a walk tracked on its retargeted legs keeps its timing): each try slows it by the
     share it needs over that (joint damping, a servo's back-EMF, is the part that falls with
@@ -132,8 +169,8 @@ def torque_feasible_task(trajectory, index, config, tries: int = 4):
     from retarget.retime import retime
 
     fps = float(trajectory.fps)
-    task, record = _spot_task(trajectory, index, config)
-    share = first = torque_share(index, task, fps, config)
+    spot = _spot_task(trajectory, index, config)
+    share = first = torque_share(index, spot.task, fps, config, spot.loaded)
     slowed = 1.0
     # a motion that travels keeps its timing: slowed, a walk on its retargeted legs falls more
     # often (29 of 31 real walks fell at 1.5x, 16 at human timing)
@@ -144,12 +181,15 @@ def torque_feasible_task(trajectory, index, config, tries: int = 4):
             break
         factor = min(room, max(1.05, share / config.max_torque_share))
         trajectory = retime(trajectory, factor)
+        if factor == room:  # the bound itself, not the bound times the rounding of each factor
+            # (3.0000000000000004 failed validation's time_warp check at its 3.0)
+            trajectory = dataclasses.replace(trajectory, retime_factor=float(config.gait.max_time_warp))
         slowed *= factor
-        task, record = _spot_task(trajectory, index, config)
-        share = torque_share(index, task, float(trajectory.fps), config)
-    record["torque_retime"] = {"factor": slowed, "torque_share_before": first, "torque_share_after": share,
-                               "travels": travels}
-    return trajectory, task, record
+        spot = _spot_task(trajectory, index, config)
+        share = torque_share(index, spot.task, float(trajectory.fps), config, spot.loaded)
+    spot.record["torque_retime"] = {"factor": slowed, "torque_share_before": first, "torque_share_after": share,
+                                    "travels": travels}
+    return spot
 
 
 def damping_speed_limit(index, share: float) -> np.ndarray:
@@ -226,10 +266,11 @@ def make_feasible(trajectory, index, config: FeasibilityConfig | None = None, pr
         reference = np.asarray(trajectory.qpos, dtype=np.float64)
         record["time_warp"] = float(trajectory.retime_factor)
     else:
-        trajectory, task, task_record = torque_feasible_task(trajectory, index, config)
+        spot = torque_feasible_task(trajectory, index, config)
+        trajectory, task, plan_contacts, loaded = spot.trajectory, spot.task, spot.contacts, spot.loaded
         reference = np.asarray(trajectory.qpos, dtype=np.float64)
         record["time_warp"] = float(trajectory.retime_factor)
-        record.update(task_record)
+        record.update(spot.record)
     timing["task"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     joint_pos, joint_vel, torque = required_torque(index, task, fps, config.contact_height_m, config.friction,
