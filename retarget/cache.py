@@ -176,7 +176,8 @@ class ProblemCache:
         return None if folder is None else cls(folder, background=background)
 
     # -- keys ---------------------------------------------------------------------------
-    def key(self, kin, window, weights, solver, velocity_constraints, collision_pairs, margin) -> str:
+    def key(self, kin, window, weights, solver, velocity_constraints, collision_pairs, margin,
+            turn_rows: bool = False) -> str:
         import casadi
         import mujoco
 
@@ -193,6 +194,7 @@ class ProblemCache:
             "weights": repr(weights),
             "solver": repr(solver),
             "velocity_constraints": bool(velocity_constraints),
+            "turn_rows": bool(turn_rows),
             "collision": [_pair_repr(p) for p in collision_pairs],
             "margin": repr(float(margin)),
             "casadi": casadi.__version__,

@@ -142,18 +142,27 @@ class Retargeter:
     def overlap(self) -> int:
         return 0 if self.config.mode == "per-frame" else self.config.overlap
 
-    def problem(self, size: int, geom_pairs: tuple = ()) -> WindowProblem:
+    def problem(self, size: int, geom_pairs: tuple = (), turn_rows: bool = False) -> WindowProblem:
         """The compiled problem for ``size`` frames, with self-collision rows for ``geom_pairs``
-        (sorted ``(geom1, geom2)`` MuJoCo geom ids; built on first use)."""
+        (sorted ``(geom1, geom2)`` MuJoCo geom ids) and, with ``turn_rows``, the bound on the
+        base's turn between frames (built on first use)."""
         from retarget.collision import pair_geometry
 
-        key = (size, tuple(geom_pairs))
+        key = (size, tuple(geom_pairs), bool(turn_rows))
         if key not in self._problems:
             geometry = tuple(pair_geometry(self.robot.model, *pair) for pair in geom_pairs)
             self._problems[key] = WindowProblem(self.kin, size, self.config.weights, self.config.solver,
                                                 collision_pairs=geometry, collision_margin=self.config.collision.margin,
-                                                cache=self.cache)
+                                                cache=self.cache, turn_rows=turn_rows)
         return self._problems[key]
+
+    def spins(self, heading: np.ndarray, fps: float) -> bool:
+        """Whether a window whose human heading is ``heading`` [W] (rad) gets the bound on the
+        base's turn: the human turns faster than half of ``SolverConfig.max_base_turn_speed_deg``
+        in some frame of it (the Bandai spinning kick: 25-33 degrees a frame at 20 fps)."""
+        h = np.unwrap(np.asarray(heading, dtype=np.float64).ravel())
+        limit = np.radians(self.config.solver.max_base_turn_speed_deg)
+        return h.size > 1 and float(np.abs(np.diff(h)).max()) * fps > 0.5 * limit
 
     def collision_monitor(self):
         """The :class:`retarget.collision.CollisionMonitor` of this robot (built on first use)."""
@@ -297,7 +306,7 @@ class Retargeter:
         else:
             bar = tqdm(windows, desc=desc, unit="window", disable=not progress)
         for s, e, commit in bar:
-            prob = self.problem(e - s, geom_pairs)
+            prob = self.problem(e - s, geom_pairs, self.spins(targets.heading[s:e], fps))
             presolved = s == 0 and known.sum() == 0 and self._presolve_size(e) > 0
             if presolved:
                 self._presolve(x, known, self._presolve_size(e), e, targets, kp_targets, contacts, vel_step, swing, fps)
@@ -366,7 +375,8 @@ class Retargeter:
         """The smallest pair set that holds ``pairs`` and is compiled for every window size in
         ``sizes`` (building a problem takes seconds; rows for pairs that stay apart cost little
         to solve), else ``pairs`` sorted."""
-        found = [key for _, key in self._problems if pairs <= set(key) and all((n, key) in self._problems for n in sizes)]
+        found = [key for _, key, _ in self._problems
+                 if pairs <= set(key) and all((n, key, False) in self._problems for n in sizes)]
         return min(found, key=len) if found else tuple(sorted(pairs))
 
     def _pair_name(self, pair: tuple[int, int]) -> str:

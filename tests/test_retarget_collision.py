@@ -152,7 +152,7 @@ def test_collision_config_off_is_the_old_behaviour(robot):
                   collision=CollisionConfig(enabled=False))
     rt = Retargeter(robot, cfg)
     rt.run(human, 20.0, progress=False)
-    assert all(pairs == () for _, pairs in rt._problems)  # no problem with collision rows was ever built
+    assert all(pairs == () for _, pairs, _ in rt._problems)  # no problem with collision rows was ever built
 
 
 def test_an_unnamed_geom_is_labelled_by_its_body_and_number():
