@@ -246,7 +246,7 @@ class SpotStepConfig:
     #: plan the reference's own lift-offs with the weight moved onto the stance foot first
     #: (False: a motion on the spot keeps its retargeted legs, with the ZMP shift).  Off by
     #: default: the real Bandai kick, the one real clip it changes, still falls on both OP3
-    #: models with it (later: op3 5.3 -> 9.0 s, op3_like 5.4 -> 9.0 s of 36-46 s;
+    #: models with it (later: op3 5.3 -> 8.9 s, op3_like 5.4 -> 5.8 s of 36-46 s;
     #: docs/experiments/2026-12-06-spinning-kick-pivot-and-collision-resolve.md)
     enabled: bool = False
     #: a foot that moves faster than this along the floor (leg lengths a second; 0.2 on the OP3
