@@ -267,3 +267,20 @@ def test_the_example_spec_parses():
     spec = load_spec(Path(__file__).resolve().parents[1] / "examples" / "sweep_small.toml")
     assert len(spec.cells) == 24 and set(spec.variants) == {"plain", "feasible"}
     assert spec.variants["feasible"].argv == ("--seconds", "3", "--feasible") and spec.time_budget_s == 300
+
+
+def test_the_sweep_benchmarks_cell_specs_are_valid_specs_of_the_asked_size(tmp_path):
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from bench_sweep import GESTURES, write_inputs
+
+    from motok_robot.sweep.spec import load_spec
+
+    for kind, cells in (("prompt", 200), ("stand", 40)):
+        folder = tmp_path / kind
+        folder.mkdir()
+        spec = load_spec(write_inputs(folder, cells, kind))
+        assert len(spec.cells) == cells
+    assert {c.prompt for c in load_spec(tmp_path / "prompt" / "bench.toml").cells} == set(GESTURES)
