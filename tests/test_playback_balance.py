@@ -354,6 +354,9 @@ def test_sigterm_and_sighup_during_a_dry_run_take_the_ctrl_c_path(robot, tmp_pat
                 return
 
     previous = signal.signal(sig, lambda *args: None)  # outside playback a stray signal is harmless
+    # what SIGINT had before playback (Python's default handler, or SIG_IGN in a process started
+    # from a backgrounded shell, which ignores SIGINT): play must leave it as it found it
+    sigint_before = signal.getsignal(signal.SIGINT)
     sender = threading.Thread(target=send_when_playing, daemon=True)
     sender.start()
     try:
@@ -372,7 +375,7 @@ def test_sigterm_and_sighup_during_a_dry_run_take_the_ctrl_c_path(robot, tmp_pat
     stats = json.loads((tmp_path / "robot.playback.stats.json").read_text())
     assert stats["completed"] is False and name in stats["stopped_because"]
     assert restored is not None and restored.__name__ == "<lambda>"  # play restored the handler it found
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert signal.getsignal(signal.SIGINT) is sigint_before
 
 
 def test_a_second_signal_does_not_cut_the_safe_stop_short(robot, smap, tmp_path):
