@@ -23,7 +23,7 @@ import numpy as np
 from motok_robot.errors import InputError
 from motok_robot.motion.skeleton import JOINT_NAMES, leg_length, rest_pose
 from retarget.config import ContactConfig, RetargetConfig
-from retarget.contacts import detect_contacts, ensure_double_support, fill_support
+from retarget.contacts import contact_phases, detect_contacts, ensure_double_support, fill_support
 from retarget.problem import RobotKinematics, WindowProblem
 from retarget.robot_model import RetargetRobot
 from retarget.swing import swing_clearance, transition_frames
@@ -473,18 +473,10 @@ def pivot_allowance(foot_dir: np.ndarray, fps: float, contacts: np.ndarray, spee
     turn = np.r_[np.zeros((1, 2)), np.abs(np.diff(angle, axis=0))]
     fast = turn * fps > np.radians(speed_deg)
     for k in range(2):
-        t = 0
-        while t < T:
-            if not contacts[t, k]:
-                t += 1
-                continue
-            u = t
-            while u + 1 < T and contacts[u + 1, k]:
-                u += 1
-            if t + 1 <= u and np.ptp(angle[t:u + 1, k]) > np.radians(min_turn_deg):
-                phase = slice(t + 1, u + 1)  # frames planted after a planted frame
+        for start, stop in contact_phases(contacts[:, k]):
+            if stop - start >= 2 and np.ptp(angle[start:stop, k]) > np.radians(min_turn_deg):
+                phase = slice(start + 1, stop)  # frames planted after a planted frame
                 out[phase, k] = np.where(fast[phase, k], margin * turn[phase, k], 0.0)
-            t = u + 1
     return out
 
 
