@@ -40,9 +40,12 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from motok_robot.feasibility.config import SpotStepConfig
 from motok_robot.feasibility.footsteps import Foothold, RobotFeet, StepSchedule
 from motok_robot.feasibility.geometry import heading
 from motok_robot.feasibility.zmp_shift import _kinematics
+from motok_robot.motion.rotations import quat_conjugate, quat_mul, quat_slerp
+from retarget.contacts import contact_phases
 
 
 @dataclass
@@ -68,10 +71,9 @@ class SpotSteps:
 
 
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """``[(first, last), ...]`` frames of each run of True in ``mask`` [T]."""
-    mask = np.asarray(mask, dtype=bool)
-    edges = np.diff(np.r_[0, mask.astype(np.int8), 0])
-    return list(zip(np.nonzero(edges == 1)[0].tolist(), (np.nonzero(edges == -1)[0] - 1).tolist()))
+    """``[(first, last), ...]`` frames of each run of True in ``mask`` [T] (the last one
+    included: :func:`retarget.contacts.contact_phases` gives them half-open)."""
+    return [(start, stop - 1) for start, stop in contact_phases(mask)]
 
 
 def support_phases(low: np.ndarray, xy: np.ndarray, fps: float, leg_length: float, *, contact_height_m: float,
@@ -156,52 +158,27 @@ def _beside(offset: np.ndarray, yaw: float, foot: int, stagger: float, width: fl
     return np.array([c * along - s * across, s * along + c * across])
 
 
-def _slerp(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
-    """Unit quaternion (wxyz) ``w`` of the way from ``a`` to ``b``."""
-    dot = float(np.dot(a, b))
-    if dot < 0:
-        b, dot = -b, -dot
-    if dot > 0.9995:
-        out = a + w * (b - a)
-    else:
-        angle = np.arccos(dot)
-        out = (np.sin((1 - w) * angle) * a + np.sin(w * angle) * b) / np.sin(angle)
-    return out / np.linalg.norm(out)
-
-
-def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    out = np.zeros(4)
-    mujoco.mju_mulQuat(out, a, b)
-    return out
-
-
-def _conj(q: np.ndarray) -> np.ndarray:
-    return np.r_[q[0], -q[1:]]
-
-
 def _ease(u: float) -> float:
     return 10 * u ** 3 - 15 * u ** 4 + 6 * u ** 5
 
 
-def plan_spot_steps(index, qpos: np.ndarray, fps: float, *, contact_height_m: float, slide_speed_per_leg: float,
-                    min_swing_s: float, min_stance_s: float, min_double_support_s: float,
-                    clearance_per_leg: float, transfer_s: float, hop_height_per_leg: float,
-                    zmp_speed_per_leg: float, max_stagger_per_leg: float,
+def plan_spot_steps(index, qpos: np.ndarray, fps: float, config: SpotStepConfig, *, contact_height_m: float,
                     feet: RobotFeet | None = None) -> SpotSteps:
-    """The spot steps of reference ``qpos`` [T, nq] at ``fps`` (see the module docstring),
-    planned on the reference with the pauses of :func:`weight_shift_frames`."""
+    """The spot steps of reference ``qpos`` [T, nq] at ``fps`` with the settings ``config``
+    (see the module docstring), planned on the reference with the pauses of
+    :func:`weight_shift_frames`."""
     feet = feet or RobotFeet(index)
     qpos = np.asarray(qpos, dtype=np.float64)
     T = qpos.shape[0]
     _, corners, ref_pos, ref_quat = _kinematics(index, qpos)
     low = corners[:, :, :, 2].min(axis=2)
-    airborne = (low > hop_height_per_leg * feet.leg_length).all(axis=1)
+    airborne = (low > config.hop_height_per_leg * feet.leg_length).all(axis=1)
     if airborne.any():
         first = int(np.nonzero(airborne)[0][0])
         return SpotSteps(None, None, None, f"both feet are off the floor at {first / fps:.2f} s (a hop)")
     contacts = support_phases(low, ref_pos[:, :, :2], fps, feet.leg_length, contact_height_m=contact_height_m,
-                              slide_speed_per_leg=slide_speed_per_leg, min_swing_s=min_swing_s,
-                              min_stance_s=min_stance_s, min_double_support_s=min_double_support_s)
+                              slide_speed_per_leg=config.slide_speed_per_leg, min_swing_s=config.min_swing_s,
+                              min_stance_s=config.min_stance_s, min_double_support_s=config.min_double_support_s)
     if contacts.all():
         return SpotSteps(None, None, None, "both feet stay down")
     if not (low[0] < contact_height_m).all() or not (low[-1] < contact_height_m).all():
@@ -212,8 +189,8 @@ def plan_spot_steps(index, qpos: np.ndarray, fps: float, *, contact_height_m: fl
         for k in range(2):
             mujoco.mju_quat2Mat(rot, ref_quat[t, k])
             centre_now[t, k] = (ref_pos[t, k] + rot.reshape(3, 3) @ feet.centre_local[k])[:2]
-    frames = weight_shift_frames(contacts, centre_now, fps, zmp_speed_m_s=zmp_speed_per_leg * feet.leg_length,
-                                 min_double_support_s=min_double_support_s)
+    frames = weight_shift_frames(contacts, centre_now, fps, zmp_speed_m_s=config.zmp_speed_per_leg * feet.leg_length,
+                                 min_double_support_s=config.min_double_support_s)
     qpos, ref_pos, ref_quat, contacts = qpos[frames], ref_pos[frames], ref_quat[frames], contacts[frames]
     T = len(frames)
     # footholds: flat where the reference has the foot at the middle of each stance, but in the
@@ -221,7 +198,7 @@ def plan_spot_steps(index, qpos: np.ndarray, fps: float, *, contact_height_m: fl
     # on its own side of it, at least the nominal stance width apart
     nominal_yaw = heading(np.c_[np.zeros((2, 3)), feet.quat0])  # each sole's own yaw at the nominal pose
     foot_yaw = feet.yaw0 + heading(np.c_[np.zeros((T * 2, 3)), ref_quat.reshape(-1, 4)]).reshape(T, 2) - nominal_yaw
-    limits = (max_stagger_per_leg * feet.leg_length, float(feet.offset[0, 1] - feet.offset[1, 1]))
+    limits = (config.max_stagger_per_leg * feet.leg_length, float(feet.offset[0, 1] - feet.offset[1, 1]))
     foot_pos, foot_quat = np.zeros((T, 2, 3)), np.zeros((T, 2, 4))
     centre = np.zeros((T, 2, 2))
     footholds = []
@@ -239,15 +216,15 @@ def plan_spot_steps(index, qpos: np.ndarray, fps: float, *, contact_height_m: fl
         foot_pos[first:last + 1, k], foot_quat[first:last + 1, k], centre[first:last + 1, k] = pos, quat, c
         footholds.append(Foothold(k, first, last, pos, quat, c))
     # swings: the reference's path, moved at its ends onto the footholds, lifted to the clearance
-    lift = clearance_per_leg * feet.leg_length
+    lift = config.clearance_per_leg * feet.leg_length
     steps = 0
     for k in range(2):
         for first, last in runs(~contacts[:, k]):
             before, after = first - 1, last + 1
             shift0 = foot_pos[before, k] - ref_pos[before, k]
             shift1 = foot_pos[after, k] - ref_pos[after, k]
-            turn0 = _mul(foot_quat[before, k], _conj(ref_quat[before, k]))
-            turn1 = _mul(foot_quat[after, k], _conj(ref_quat[after, k]))
+            turn0 = quat_mul(foot_quat[before, k], quat_conjugate(ref_quat[before, k]))
+            turn1 = quat_mul(foot_quat[after, k], quat_conjugate(ref_quat[after, k]))
             n = last - first + 1
             for i, t in enumerate(range(first, last + 1)):
                 u = (i + 1) / (n + 1)
@@ -256,12 +233,13 @@ def plan_spot_steps(index, qpos: np.ndarray, fps: float, *, contact_height_m: fl
                 floor = (1 - w) * foot_pos[before, k, 2] + w * foot_pos[after, k, 2]
                 pos[2] = max(pos[2], floor + lift * np.sin(np.pi * u))
                 foot_pos[t, k] = pos
-                foot_quat[t, k] = _mul(_slerp(turn0, turn1, w), ref_quat[t, k])
+                foot_quat[t, k] = quat_mul(quat_slerp(turn0, turn1, w), ref_quat[t, k])
             steps += 1
     footholds.sort(key=lambda f: (f.start, f.foot))
     schedule = StepSchedule(contacts=contacts, foot_pos=foot_pos, foot_quat=foot_quat, footholds=footholds,
                             steps=steps, heading=heading(qpos), loaded=contacts.copy())
-    return SpotSteps(schedule, spot_zmp_reference(contacts, centre, max(1, int(round(transfer_s * fps)))), frames, "")
+    zmp = spot_zmp_reference(contacts, centre, max(1, int(round(config.transfer_s * fps))))
+    return SpotSteps(schedule, zmp, frames, "")
 
 
 def spot_zmp_reference(contacts: np.ndarray, centre: np.ndarray, transfer: int) -> np.ndarray:

@@ -129,13 +129,7 @@ def _spot_task(trajectory, index, config) -> SpotTask:
     fps = float(trajectory.fps)
     record: dict = {}
     if config.spot_steps.enabled:
-        s = config.spot_steps
-        spot = plan_spot_steps(index, reference, fps, contact_height_m=config.contact_height_m,
-                               slide_speed_per_leg=s.slide_speed_per_leg, min_swing_s=s.min_swing_s,
-                               min_stance_s=s.min_stance_s, min_double_support_s=s.min_double_support_s,
-                               clearance_per_leg=s.clearance_per_leg, transfer_s=s.transfer_s,
-                               hop_height_per_leg=s.hop_height_per_leg, zmp_speed_per_leg=s.zmp_speed_per_leg,
-                               max_stagger_per_leg=s.max_stagger_per_leg)
+        spot = plan_spot_steps(index, reference, fps, config.spot_steps, contact_height_m=config.contact_height_m)
         record["spot_steps"] = spot.record(fps)
         if spot.schedule is not None:
             held = hold_frames(trajectory, spot.frames)
