@@ -133,7 +133,8 @@ sim = true
     args = parse(spec.variants["closed"].argv)
     config = pipeline_config(args)
     assert config.max_retime == 1.5 and config.retarget.weights.zmp == 500
-    assert config.feasibility is not None and config.feasibility.retime == 2 and config.plots is False
+    # the feasibility settings asked for, applied later over the robot's own (robot_config)
+    assert config.feasibility is not None and config.feasibility["retime"] == 2 and config.plots is False
     kwargs = run_arguments(args)
     assert kwargs["playback"] == "sim" and kwargs["render"] is False and kwargs["constraints"] is None
 
